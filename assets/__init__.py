@@ -1,0 +1,1 @@
+"""Shipped data: the LinkD checkpoint, its model card, and example curves and mechanisms."""

@@ -1,0 +1,244 @@
+"""Give every part a z-layer so that parts sharing a layer never come near each other.
+
+The analytic kinematics sweeps a full crank revolution. A part's outline is the convex hull of
+its joints grown by half the link width, so two parts may share a layer only if their hulls stay
+a width plus the clearance apart at every angle. A pin crosses every layer between the outermost
+parts it joins, so a part that comes near a pin may not sit on those layers. The conflict graph
+is coloured with as few layers as a small exact search finds.
+
+The ground is a base plate under the stack of moving parts: the pins of ground joints stand in
+it. When no order of the stack lets every such pin reach up clear of the others, some pins hang
+from a cover plate over the stack instead (the two plates are one rigid frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from linkd.mechanism import Mechanism
+
+from .options import Sizes
+from .parts import Assembly, joint_paths
+from .stacking import (
+    SEARCH_BUDGET,
+    PinState,
+    StackSearch,
+    chromatic_number,
+    find_order,
+    stack_in_order,
+)
+
+SWEEP_ANGLES = 720  # crank angles of a first sweep
+MAX_SWEEP_ANGLES = 8192
+SWEEP_STEP = 0.05  # of the link width: the most a joint may move between two sampled angles
+MAX_COVER_TRIES = 4  # choices of ground pins hanging from a cover plate, per layer count
+
+
+@dataclass(frozen=True)
+class Layout:
+    layers: np.ndarray  # (P,) layer of every part; the ground's (base plate) is 0
+    pin_spans: list[tuple[int, int]]  # (lowest, highest) layer of each pin, plates included
+    top_joints: tuple[int, ...]  # ground joints held by a cover plate on the top layer
+    count: int  # number of layers, base and cover plates included
+    min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
+    minimal: bool = True  # the search proved that fewer layers cannot work
+
+
+@dataclass(frozen=True)
+class Plate:
+    """A solid plate of a part on one layer (the ground has a base and maybe a cover)."""
+
+    name: str
+    part: int
+    joints: tuple[int, ...]  # joints it has holes for
+    layer: int
+
+
+def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
+    """Every plate of the layout: the ground's base (and cover), then one per moving part."""
+    ground = assembly.parts[0]
+    base = tuple(j for j in ground.joints if j not in layout.top_joints)
+    out = [Plate(ground.name, 0, base, 0)] if base else []
+    if layout.top_joints:
+        out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1))
+    moving = enumerate(assembly.parts[1:], start=1)
+    return out + [Plate(part.name, p, part.joints, int(layout.layers[p])) for p, part in moving]
+
+
+@dataclass(frozen=True)
+class Conflicts:
+    parts: np.ndarray  # (P, P) bool: the two parts may not share a layer
+    blocked: list[list[int]]  # per pin: parts that come near it (they may not sit within its span)
+    distance: np.ndarray  # (P, P) least distance between the parts' joint hulls over the sweep
+
+
+def convex_hull(points: np.ndarray) -> list[int]:
+    """Indices of the counter-clockwise convex hull of 2D points (collinear points dropped)."""
+    order = sorted(range(len(points)), key=lambda k: (points[k][0], points[k][1]))
+    points = np.asarray(points)[:, 0] + 1j * np.asarray(points)[:, 1]
+
+    def half(indices: list[int]) -> list[int]:
+        chain: list[int] = []
+        for k in indices:
+            while len(chain) >= 2 and _cross(points[chain[-2]], points[chain[-1]], points[k]) <= 0:
+                chain.pop()
+            chain.append(k)
+        return chain
+
+    lower, upper = half(order), half(order[::-1])
+    hull = lower[:-1] + upper[:-1]
+    return hull or order[:1]
+
+
+def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """z of (a - o) x (b - o) for points as complex numbers, broadcast."""
+    return ((a - o).conj() * (b - o)).imag
+
+
+def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from p to segment a-b, points as complex numbers, broadcast."""
+    ab, ap = b - a, p - a
+    t = np.clip((ap * ab.conj()).real / np.maximum(ab.real**2 + ab.imag**2, 1e-300), 0.0, 1.0)
+    return np.abs(ap - t * ab)
+
+
+def segment_distance(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """Distance between segments a1-a2 and b1-b2 (complex points, broadcast; 0 if they cross)."""
+    d = np.minimum(
+        np.minimum(_point_segment(a1, b1, b2), _point_segment(a2, b1, b2)),
+        np.minimum(_point_segment(b1, a1, a2), _point_segment(b2, a1, a2)),
+    )
+    crossing = (_cross(a1, a2, b1) * _cross(a1, a2, b2) < 0) & (
+        _cross(b1, b2, a1) * _cross(b1, b2, a2) < 0
+    )
+    return np.where(crossing, 0.0, d)
+
+
+def hull_edges(assembly: Assembly, positions: np.ndarray) -> list[tuple[int, int, int]]:
+    """(part, joint, next joint) along each part's hull in the assembly pose, counter-clockwise.
+
+    A two-joint hull is one segment, a one-joint hull a point (a segment of zero length).
+    """
+    edges = []
+    for p, part in enumerate(assembly.parts):
+        joints = list(part.joints)
+        hull = [joints[k] for k in convex_hull(positions[joints])]
+        if len(hull) <= 2:
+            edges.append((p, hull[0], hull[-1]))
+        else:
+            edges += [(p, a, b) for a, b in zip(hull, hull[1:] + hull[:1])]
+    return edges
+
+
+def sweep(mech: Mechanism, width: float) -> np.ndarray:
+    """(N, T, 2) joint paths over a revolution, sampled so finely that no joint moves more than
+    SWEEP_STEP link widths between two angles (within MAX_SWEEP_ANGLES)."""
+    paths = joint_paths(mech, np.arange(SWEEP_ANGLES) * (2 * np.pi / SWEEP_ANGLES))
+    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    count = min(MAX_SWEEP_ANGLES, int(np.ceil(SWEEP_ANGLES * step / (SWEEP_STEP * width))))
+    if count <= SWEEP_ANGLES:
+        return paths
+    return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
+
+
+def find_conflicts(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Conflicts:
+    """Moving part pairs that may not share a layer, and the parts each pin's span must avoid.
+
+    paths: (N, T, 2) joint positions over the sweep. Distances are between joint hulls, which
+    the plates cover with half a width to spare; the largest joint step between two sampled
+    angles is added to each margin, so what happens between samples is covered too.
+    """
+    n_parts, n_joints = len(assembly.parts), len(paths)
+    edges = hull_edges(assembly, paths[:, 0])
+    owner = np.array([e[0] for e in edges])
+    points = paths[..., 0] + 1j * paths[..., 1]  # (N, T)
+    start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]  # (E, T)
+    edge_gap = np.zeros((len(edges), len(edges)))
+    for k in range(len(edges)):  # one row of the symmetric table at a time, over all angles
+        edge_gap[k, k:] = segment_distance(start[k], end[k], start[k:], end[k:]).min(-1)
+        edge_gap[k:, k] = edge_gap[k, k:]
+    joint_gap = np.stack([_point_segment(points[n], start, end).min(-1) for n in range(n_joints)])
+    distance = np.full((n_parts, n_parts), np.inf)
+    np.minimum.at(distance, (owner[:, None], owner[None, :]), edge_gap)
+    to_part = np.full((n_joints, n_parts), np.inf)
+    np.minimum.at(to_part, (np.arange(n_joints)[:, None], owner[None, :]), joint_gap)
+    for q in range(n_parts):
+        mine = owner == q
+        if mine.sum() >= 3:  # a polygon: a joint inside it is at distance 0
+            left = _cross(start[mine][None], end[mine][None], points[:, None]) >= 0  # (N, e, T)
+            to_part[left.all(1).any(-1), q] = 0.0
+    for p, part in enumerate(assembly.parts):
+        inside = to_part[list(part.joints)].min(0)  # a vertex of p inside q
+        distance[p] = np.minimum(distance[p], inside)
+        distance[:, p] = np.minimum(distance[:, p], inside)
+    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    width, clearance = sizes.link_width, sizes.clearance
+    near = distance < width + clearance + step
+    np.fill_diagonal(near, False)
+    near[0], near[:, 0] = False, False  # the ground's plates have layers of their own
+    pin_reach = (width + sizes.hole_diameter) / 2 + clearance + step
+    blocked = [
+        [q for q in range(1, n_parts) if q not in pin.members and to_part[pin.joint, q] < pin_reach]
+        for pin in assembly.pins
+    ]
+    return Conflicts(near, blocked, distance)
+
+
+def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """The layer of every part, with as few layers as the search finds.
+
+    Layer 0 is the ground's base plate, under the stack of moving parts (layers 1..K). Each
+    ground joint's pin stands in the base and reaches up to its highest part; where no order
+    of the parts allows that, some pins hang from a cover plate over the stack instead (layer
+    K + 1). First an order of the parts that keeps every pin clear is found (or the mechanism
+    cannot be built flat: ValueError), then the fewest layers the search can reach.
+    """
+    conflicts = find_conflicts(assembly, paths, sizes)
+    moving = conflicts.parts[1:, 1:]
+    pins = [
+        ([m - 1 for m in pin.members if m], [b - 1 for b in blocked])
+        for pin, blocked in zip(assembly.pins, conflicts.blocked)
+    ]
+    grounded = {k for k, pin in enumerate(assembly.pins) if 0 in pin.members}
+    covers = [set(c) for r in range(len(grounded) + 1) for c in combinations(sorted(grounded), r)]
+    proved = True
+    for cover in covers[: 1 + MAX_COVER_TRIES]:  # no cover first, then the smallest
+        order, done = find_order(PinState(len(moving), pins, grounded, cover), moving)
+        if order is not None:
+            break
+        proved &= done
+    else:
+        raise ValueError(
+            "cannot be built from flat layers: some parts pass over pins whose plates lie above "
+            f"and below them, in every order {'tried' if proved else 'the search could try'}"
+        )
+    layers = stack_in_order(moving, order)
+    fewest, minimal = chromatic_number(moving)
+    for stack in range(fewest, max(layers)):
+        search = StackSearch(moving, PinState(len(moving), pins, grounded, cover))
+        found = search.run(stack)
+        if found is not None:
+            layers = found
+            break
+        minimal &= search.nodes <= SEARCH_BUDGET
+    return _layout(assembly, conflicts, sizes, layers, cover, max(layers), minimal)
+
+
+def _layout(assembly, conflicts, sizes, moving_layers, cover, stack, minimal) -> Layout:
+    """The layout of a search result: layers 1..stack of the moving parts, base and cover."""
+    layers = np.array([0, *moving_layers])
+    spans = []
+    for k, pin in enumerate(assembly.pins):
+        span = [int(layers[m]) for m in pin.members]
+        if k in cover:  # held by the cover, not by the base
+            span = [int(layers[m]) for m in pin.members if m] + [stack + 1]
+        spans.append((min(span), max(span)))
+    top = tuple(sorted(assembly.pins[k].joint for k in cover))
+    n = len(layers)
+    same = (layers[:, None] == layers[None, :]) & ~np.eye(n, dtype=bool)
+    same[0], same[:, 0] = False, False
+    gap = (conflicts.distance[same] - sizes.link_width).min(initial=np.inf)
+    return Layout(layers, spans, top, stack + 1 + bool(top), float(gap), minimal)

@@ -1,0 +1,248 @@
+"""The MuJoCo model (MJCF) of an assembled, layered mechanism, and its scene.
+
+Every part is a body whose frame sits at its hinge in the plane z = 0, with its plate raised to
+its layer; hinges turn about z. Loops close with `connect` equalities between sites in that
+common plane, so closing them asks nothing along z. Pins are cylinders on their hub's body,
+spanning exactly the layers of the parts they join, and excluded from contact with those parts
+only. Lengths are metres (CONTRACT §3).
+
+Simulation options. Loop closures are soft constraints in MuJoCo; the stiffest safe setting is a
+time constant of two time steps (`solref`) with impedance near 1 (`solimp` 0.9999). With RK4 at
+0.5 ms, a 2 s motor revolution of the Jansen leg keeps its loops closed to 8e-8 of its shortest
+link (the contract asks 1e-6; at 1 ms it is 3e-7, at 2 ms 1.3e-6); implicitfast needs 50 us for
+the same and runs five times slower. The crank servo is critically damped at 10 Hz for the
+largest inertia the crank drives, and the crank hinge carries a rotor inertia of that size:
+without it a light crank's own mode under the servo is too fast for RK4 (see `servo_gains`).
+The Newton solver with a tight tolerance converges in a few iterations.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import numpy as np
+
+from linkd.mechanism import UNITS_IN_METRES, Mechanism
+
+from .layers import Layout, Plate, convex_hull, plates
+from .options import Sizes
+from .parts import CRANK, Assembly, hinge_angles, part_origins
+
+TIMESTEP = 5e-4  # s
+SOLREF = (2 * TIMESTEP, 1.0)  # loop-closure time constant (two steps) and damping ratio
+SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
+MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
+SITE_RADIUS = 0.15  # of the link width
+LAYER_COLOURS = [(0.55, 0.55, 0.55), (0.85, 0.45, 0.2), (0.2, 0.55, 0.8), (0.35, 0.7, 0.35),
+                 (0.8, 0.7, 0.2), (0.6, 0.4, 0.75), (0.3, 0.7, 0.7), (0.8, 0.35, 0.5)]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Servo:
+    """The crank's position servo and the motor's rotor inertia (armature) on the crank hinge."""
+
+    kp: float  # N m / rad
+    kv: float  # N m s / rad
+    armature: float  # kg m^2
+
+
+def _fmt(*values: float) -> str:
+    return " ".join(f"{float(v):.12g}" for v in values)
+
+
+class _Builder:
+    """Writes the model's XML tree part by part; lengths converted to metres on the way."""
+
+    def __init__(self, mech, assembly: Assembly, layout: Layout, sizes: Sizes, armature: float):
+        self.mech, self.assembly, self.layout = mech, assembly, layout
+        self.armature = armature
+        self.unit = UNITS_IN_METRES[mech.units]
+        self.width = sizes.link_width * self.unit
+        self.hole = sizes.hole_diameter * self.unit
+        self.thickness = sizes.thickness * self.unit
+        self.pitch = sizes.pitch * self.unit
+        self.origin = part_origins(mech, assembly)
+        self.sites: dict[tuple[int, int], str] = {}
+        self.bodies: dict[int, ET.Element] = {}
+
+    def local(self, part: int, joint: int) -> np.ndarray:
+        """Position of a mechanism joint in a part's body frame, in metres."""
+        return (self.mech.positions[joint] - self.origin[part]) * self.unit
+
+    def site(self, part: int, joint: int, name: str | None = None) -> str:
+        """A site on `part` at `joint`, in the common plane z = 0 (created once)."""
+        key = (part, joint) if name is None else (part, name)
+        if key not in self.sites:
+            name = name or f"{self.assembly.parts[part].name}_at_{joint}"
+            x, y = self.local(part, joint)
+            ET.SubElement(self.bodies[part], "site", name=name, pos=_fmt(x, y, 0))
+            self.sites[key] = name
+        return self.sites[key]
+
+    def bodies_tree(self, worldbody: ET.Element, meshes: dict[str, str]) -> None:
+        """Nested bodies, parents first: each with its hinge (the ground has none) and plates."""
+        every = plates(self.assembly, self.layout)
+        self.bodies[0] = ET.SubElement(worldbody, "body", name=self.assembly.parts[0].name)
+        for plate in every:
+            if plate.part == 0:
+                self.plate(plate, meshes)
+        moving = {plate.part: plate for plate in every if plate.part}
+        for h in self.assembly.hinges:
+            x, y = (self.origin[h.child] - self.origin[h.parent]) * self.unit
+            name = self.assembly.parts[h.child].name
+            body = ET.SubElement(self.bodies[h.parent], "body", name=name, pos=_fmt(x, y, 0))
+            joint = ET.SubElement(body, "joint", name=h.name)
+            if h.name == CRANK and self.armature > 0:
+                joint.set("armature", _fmt(self.armature))
+            self.bodies[h.child] = body
+            self.plate(moving[h.child], meshes)
+
+    def plate(self, plate: Plate, meshes: dict[str, str]) -> None:
+        """A plate on its layer: its mesh, or boxes along its hull and discs at its joints."""
+        body = self.bodies[plate.part]
+        z = plate.layer * self.pitch
+        colour = _fmt(*LAYER_COLOURS[plate.layer % len(LAYER_COLOURS)], 1)
+        if plate.name in meshes:
+            ET.SubElement(body, "geom", name=plate.name, type="mesh", mesh=plate.name,
+                          pos=_fmt(0, 0, z), rgba=colour)  # fmt: skip
+            return
+        points = np.array([self.local(plate.part, j) for j in plate.joints])
+        hull = [points[k] for k in convex_hull(points)]
+        sides = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
+        zc = z + self.thickness / 2
+        for k, (a, b) in enumerate(sides):
+            length = np.linalg.norm(b - a)
+            if length == 0:
+                continue
+            (cx, cy), angle = (a + b) / 2, np.arctan2(*(b - a)[::-1])
+            ET.SubElement(body, "geom", name=f"{plate.name}_bar{k}", type="box",
+                          size=_fmt(length / 2, self.width / 2, self.thickness / 2),
+                          pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
+        for j, (x, y) in zip(plate.joints, points):
+            ET.SubElement(body, "geom", name=f"{plate.name}_boss{j}", type="cylinder",
+                          size=_fmt(self.width / 2, self.thickness / 2), pos=_fmt(x, y, zc),
+                          rgba=colour)  # fmt: skip
+
+    def pin(self, k: int) -> None:
+        """A pin body on its hub, spanning the layers of the parts it joins."""
+        pin = self.assembly.pins[k]
+        lo, hi = self.layout.pin_spans[k]
+        bottom, top = lo * self.pitch, hi * self.pitch + self.thickness
+        x, y = self.local(pin.hub, pin.joint)
+        body = ET.SubElement(self.bodies[pin.hub], "body", name=pin.name, pos=_fmt(x, y, 0))
+        ET.SubElement(body, "geom", name=pin.name, type="cylinder",
+                      size=_fmt(self.hole / 2, (top - bottom) / 2),
+                      pos=_fmt(0, 0, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip
+
+
+def build_mjcf(
+    mech: Mechanism,
+    assembly: Assembly,
+    layout: Layout,
+    sizes: Sizes,
+    meshes: dict[str, str] | None = None,
+    servo: Servo = Servo(1.0, 0.1, 0.0),
+) -> str:
+    """The model as MJCF text. `meshes` maps part names to STL paths relative to the model file;
+    without it the plates are boxes and cylinders."""
+    b = _Builder(mech, assembly, layout, sizes, servo.armature)
+    root = ET.Element("mujoco", model="linkd mechanism")
+    ET.SubElement(root, "compiler", angle="radian", autolimits="true",
+                  boundmass=_fmt(MIN_MASS), boundinertia=_fmt(MIN_INERTIA))  # fmt: skip
+    option = ET.SubElement(root, "option", timestep=_fmt(TIMESTEP), integrator="RK4",
+                           solver="Newton", iterations="50", tolerance="1e-12")  # fmt: skip
+    ET.SubElement(option, "flag", filterparent="disable")
+    default = ET.SubElement(root, "default")
+    ET.SubElement(default, "joint", type="hinge", axis="0 0 1")
+    ET.SubElement(default, "geom", density=_fmt(sizes.density))
+    ET.SubElement(default, "equality", solref=_fmt(*SOLREF), solimp=_fmt(*SOLIMP))
+    ET.SubElement(default, "site", size=_fmt(SITE_RADIUS * b.width), rgba="0.9 0.1 0.1 1")
+    if meshes:
+        asset = ET.SubElement(root, "asset")
+        for name, path in meshes.items():
+            ET.SubElement(asset, "mesh", name=name, file=path, inertia="exact")
+    b.bodies_tree(ET.SubElement(root, "worldbody"), meshes or {})
+    contact = ET.SubElement(root, "contact")
+    for k, pin in enumerate(assembly.pins):
+        b.pin(k)
+        for m in pin.members:
+            if m != pin.hub:
+                ET.SubElement(contact, "exclude", body1=pin.name, body2=assembly.parts[m].name)
+    equality = ET.SubElement(root, "equality")
+    for loop in assembly.loops:
+        ET.SubElement(equality, "connect", name=loop.name, site1=b.site(loop.part, loop.joint),
+                      site2=b.site(loop.hub, loop.joint))  # fmt: skip
+    ee = mech.end_effector
+    carrier = next((pin.hub for pin in assembly.pins if pin.joint == ee), None)
+    if carrier is None:
+        carrier = next(p for p, part in enumerate(assembly.parts) if ee in part.joints)
+    b.site(carrier, ee, name="end_effector")
+    actuator = ET.SubElement(root, "actuator")
+    ET.SubElement(actuator, "position", name="motor", joint=CRANK, kp=_fmt(servo.kp),
+                  kv=_fmt(servo.kv), ctrllimited="false")  # fmt: skip
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def build_scene(mech: Mechanism, layout: Layout, sizes: Sizes, model_file: str) -> str:
+    """A scene that includes the model, with a floor under the lowest layer and a light."""
+    unit = UNITS_IN_METRES[mech.units]
+    centre = mech.positions.mean(0) * unit
+    extent = 3 * mech.scale * unit
+    height = (layout.count * sizes.pitch) * unit
+    root = ET.Element("mujoco", model="linkd mechanism scene")
+    ET.SubElement(root, "include", file=model_file)
+    ET.SubElement(root, "statistic", center=_fmt(*centre, height / 2), extent=_fmt(extent))
+    visual = ET.SubElement(root, "visual")
+    ET.SubElement(visual, "headlight", diffuse="0.6 0.6 0.6", ambient="0.3 0.3 0.3")
+    ET.SubElement(visual, "global", azimuth="120", elevation="-30")
+    asset = ET.SubElement(root, "asset")
+    ET.SubElement(asset, "texture", name="grid", type="2d", builtin="checker", width="512",
+                  height="512", rgb1="0.92 0.92 0.92", rgb2="0.84 0.84 0.84")  # fmt: skip
+    ET.SubElement(asset, "material", name="grid", texture="grid", texuniform="true",
+                  texrepeat=_fmt(4 / extent, 4 / extent), reflectance="0.1")  # fmt: skip
+    worldbody = ET.SubElement(root, "worldbody")
+    ET.SubElement(worldbody, "light", pos=_fmt(*centre, height + extent), dir="0 0 -1",
+                  directional="true")  # fmt: skip
+    ET.SubElement(worldbody, "geom", name="floor", type="plane", material="grid",
+                  size=_fmt(0, 0, extent / 10),
+                  pos=_fmt(*centre, -sizes.layer_gap * unit))  # fmt: skip
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def qpos_at(model, mech: Mechanism, angles: np.ndarray) -> np.ndarray:
+    """(T, nq) joint positions of the exported model at crank angles (analytic kinematics)."""
+    qpos = np.tile(model.qpos0, (len(angles), 1))
+    for name, values in hinge_angles(mech, angles).items():
+        qpos[:, model.joint(name).qposadr[0]] = values
+    return qpos
+
+
+def servo_gains(model, mech: Mechanism, n_angles: int = 64) -> Servo:
+    """Crank servo and rotor inertia from the largest inertia the crank drives in a revolution.
+
+    That inertia is max v' M v over the cycle, v being the joint velocities per unit crank
+    speed (central differences of the analytic pose). A rotor of the same inertia keeps the
+    crank hinge from being the lightest thing in the model, whose own mode under the servo
+    would otherwise be too fast for an explicit integrator; the servo is then critically damped
+    at SERVO_HZ for mechanism plus rotor at their heaviest.
+    """
+    import mujoco
+
+    angles = np.linspace(0, 2 * np.pi, n_angles, endpoint=False)
+    h = 1e-6
+    turn = qpos_at(model, mech, angles + h) - qpos_at(model, mech, angles - h)
+    v = np.angle(np.exp(1j * turn)) / (2 * h)  # every joint is a hinge: differences wrap
+    data = mujoco.MjData(model)
+    mass = np.zeros((model.nv, model.nv))
+    inertia = 0.0
+    for q, dq in zip(qpos_at(model, mech, angles), v):
+        data.qpos[:] = q
+        mujoco.mj_forward(model, data)
+        mujoco.mj_fullM(model, data, mass)
+        inertia = max(inertia, float(dq @ mass @ dq))
+    omega = 2 * np.pi * SERVO_HZ
+    return Servo(kp=2 * inertia * omega**2, kv=4 * inertia * omega, armature=inertia)

@@ -1,0 +1,60 @@
+"""The `linkd` command line: one sub-command per module in `linkd.commands`.
+
+Bad input (an `InputError`, or a usage error) prints one line and exits with status 2;
+heavy libraries are imported by each command only when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from linkd import __version__
+from linkd.errors import InputError
+
+ORDER = ("design", "export", "verify", "validate", "trace", "view", "dataset", "train", "eval",
+         "bench")  # fmt: skip
+
+
+def command_names() -> list[str]:
+    """Modules of `linkd.commands`, in the order the help lists them."""
+    import linkd.commands
+
+    found = [m.name for m in pkgutil.iter_modules(linkd.commands.__path__)]
+    rank = {name: k for k, name in enumerate(ORDER)}
+    return sorted(found, key=lambda name: (rank.get(name, len(ORDER)), name))
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (exit status 2)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        print(f"{self.prog}: error: {message}", file=sys.stderr)
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="linkd", description="Design, export and verify planar linkages.")
+    parser.add_argument("--version", action="version", version=f"linkd {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for name in command_names():
+        importlib.import_module(f"linkd.commands.{name}").register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except InputError as exc:
+        print(f"linkd: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("linkd: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,149 @@
+"""`linkd bench TARGET`: throughput figures, printed (benchmarks, not tests).
+
+Each target is a function taking the parsed arguments: to add one, give it a sub-parser in
+`register` whose `run` default is that function.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="measure throughput (kinematics, generator, design)")
+    targets = p.add_subparsers(dest="target", required=True, parser_class=type(p))
+
+    k = targets.add_parser("kinematics", help="forward kinematics + validation, mechanisms/s")
+    k.add_argument("--batch", type=int, default=20_000, help="20-joint mechanisms in the batch")
+    k.add_argument("--angles", type=int, default=200, help="crank angles")
+    k.add_argument("--repeat", type=int, default=3, help="timed runs (the best is reported)")
+    k.add_argument("--chunk", type=int, default=512, help="mechanisms per kinematics chunk")
+    k.add_argument("--eager", action="store_true", help="skip torch.compile (no C++ compiler)")
+    k.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes, each validating its share of the batch")  # fmt: skip
+    k.add_argument("--threads", type=int, default=1, help="torch threads per process")
+    k.add_argument("--seed", type=int, default=0)
+    k.set_defaults(run=kinematics)
+
+    g = targets.add_parser("generator", help="valid curated random mechanisms/s")
+    g.add_argument("--count", type=int, default=20_000, help="mechanisms to generate")
+    g.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes")
+    g.add_argument("--seed", type=int, default=0)
+    g.set_defaults(run=generator)
+
+    d = targets.add_parser("design", help="linkd design on curves: validity, error, time")
+    d.add_argument("curves", nargs="*", help="curve CSV files, or folders of them")
+    d.add_argument("--dataset", help="also the test split of this data set folder")
+    d.add_argument("--limit", type=int, help="at most this many curves")
+    d.add_argument("--candidates", type=int, default=128, help="designs sampled per curve")
+    d.add_argument("--strategy", default="node", choices=("node", "graph", "oneshot"))
+    d.add_argument("--no-refine", dest="refine", action="store_false")
+    d.add_argument("--time-budget", type=float, default=30.0, help="seconds per curve")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
+    d.add_argument("--json", help="also write the figures to this JSON file")
+    d.set_defaults(run=design)
+
+
+def kinematics(args: argparse.Namespace) -> int:
+    """Validate one batch of random valid 20-joint mechanisms at `--angles` crank angles.
+
+    The batch is split over `--workers` processes. Each compiles its kernel before the clock
+    starts; the time covers sending the batch, forward kinematics, validation, the verdicts back.
+    Small single-threaded processes beat torch's threads here: a fused step is too short to
+    share across threads.
+    """
+    import multiprocessing
+
+    import numpy as np
+
+    from linkd.batch import LinkageBatch
+    from linkd.dataset import generate_parallel
+    from linkd.generator import GeneratorSettings
+
+    settings = GeneratorSettings(min_nodes=20, max_nodes=20, n_angles=args.angles)
+    workers = max(1, args.workers)
+    graphs = generate_parallel(args.batch, args.seed, workers, settings, shard_size=2000).graphs
+    parts = [LinkageBatch.from_graphs(g) for g in np.array_split(graphs, workers)]
+    config = (args.angles, args.chunk, not args.eager, args.threads)
+    with multiprocessing.get_context("spawn").Pool(workers, _warm_up, (config,)) as pool:
+        start = time.perf_counter()
+        pool.map(_pause, range(workers))  # every worker has compiled and is waiting
+        warm = time.perf_counter() - start
+        best, valid = float("inf"), 0.0
+        for _ in range(args.repeat):
+            start = time.perf_counter()
+            verdicts = pool.map(_validate, parts, chunksize=1)
+            best = min(best, time.perf_counter() - start)
+            valid = float(np.mean(np.concatenate(verdicts) == 0))
+    kernel = "eager torch" if args.eager else "torch.compile"
+    print(f"kinematics + validation: {args.batch} mechanisms x 20 joints x {args.angles} angles")
+    print(f"  kernel         {kernel} (warm-up {warm:.1f} s)")
+    print(f"  processes      {workers} x {args.threads} torch thread(s), chunks of {args.chunk}")
+    print(f"  valid          {valid:.1%}")
+    print(f"  best of {args.repeat}      {best:.3f} s")
+    print(f"  throughput     {args.batch / best:,.0f} mechanisms/s")
+    return 0
+
+
+_CONFIG: tuple = ()
+
+
+def _warm_up(config: tuple) -> None:
+    """Worker set-up: torch threads, and one small validation to compile the kernel."""
+    import torch
+
+    from linkd import classic
+    from linkd.batch import LinkageBatch
+
+    global _CONFIG
+    _CONFIG = config
+    torch.set_num_threads(config[3])
+    _validate(LinkageBatch.from_mechanisms([classic.jansen_leg()] * 4))
+
+
+def _pause(_: int) -> None:
+    time.sleep(0.2)
+
+
+def _validate(batch) -> object:
+    """Worker: the verdict of every mechanism of its share of the batch."""
+    from linkd.validator import validate
+
+    angles, chunk, compiled, _ = _CONFIG
+    return validate(batch, angles, chunk=chunk, compiled=compiled).status
+
+
+def design(args: argparse.Namespace) -> int:
+    """The design pipeline on each curve (see `linkd.design.bench`)."""
+    from linkd.design.bench import main
+
+    return main(args)
+
+
+def generator(args: argparse.Namespace) -> int:
+    """Generate `--count` curated mechanisms with `--workers` processes (no files written)."""
+    from linkd.dataset import generate_parallel
+
+    start, start_cpu = time.perf_counter(), _cpu_seconds()
+    samples = generate_parallel(args.count, args.seed, args.workers)
+    seconds, cpu = time.perf_counter() - start, _cpu_seconds() - start_cpu
+    counts = {int(n): int((samples.n_nodes == n).sum()) for n in sorted(set(samples.n_nodes))}
+    print(f"generator: {len(samples)} valid curated mechanisms")
+    print(f"  workers        {args.workers}")
+    print(f"  node counts    {min(counts)}..{max(counts)}, {min(counts.values())} to "
+          f"{max(counts.values())} each")  # fmt: skip
+    print(f"  seconds        {seconds:.2f} ({cpu:.2f} s of CPU time, workers included)")
+    print(f"  throughput     {len(samples) / seconds:,.0f} mechanisms/s "
+          f"({len(samples) / seconds * 3600 / 1e6:.2f} M per hour)")  # fmt: skip
+    return 0
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished child processes."""
+    import resource
+
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime

@@ -1,0 +1,109 @@
+"""`linkd export M.json --export mjcf,stl --out OUT`: a MuJoCo model and STL parts of a mechanism.
+
+OUT (CONTRACT §4) is built in a staging folder and moved into place only when complete.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from linkd.errors import InputError
+from linkd.mechanism import Mechanism
+from linkd.outdir import fresh_name, staged_output, write_atomic
+
+FORMATS = ("mjcf", "stl")
+SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "density")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("export", help="write a MuJoCo model (MJCF) and STL parts of a mechanism")
+    p.add_argument("mechanism", help="mechanism.json")
+    p.add_argument("--export", default="mjcf,stl", help="formats, comma separated: mjcf, stl")
+    p.add_argument("--out", help="output folder (default: <mechanism>-export, a new name)")
+    p.add_argument("--force", action="store_true", help="replace OUT even if it is not an output")
+    for name in SIZES:
+        unit = "kg/m^3" if name == "density" else "mechanism units"
+        flag = "--" + name.replace("_", "-")
+        p.add_argument(flag, type=float, help=f"{name.replace('_', ' ')} ({unit})")
+    p.set_defaults(run=run)
+
+
+def parse_formats(text: str) -> set[str]:
+    formats = {f.strip() for f in text.split(",") if f.strip()}
+    unknown = sorted(formats - set(FORMATS))
+    if unknown or not formats:
+        raise InputError(f"--export: expected a list of {', '.join(FORMATS)}, got {text!r}")
+    return formats
+
+
+def run(args: argparse.Namespace) -> int:
+    from linkd.export import ExportOptions, export_mechanism
+    from linkd.export.options import resolve_sizes
+    from linkd.export.parts import rigid_parts
+    from linkd.validator import validate_mechanism
+
+    start = time.perf_counter()
+    formats = parse_formats(args.export)
+    mech = Mechanism.load(args.mechanism)
+    status, _ = validate_mechanism(mech)
+    if status:
+        print(f"{args.mechanism}: invalid: {status.reason}")
+        return 1
+    given = {name: getattr(args, name) for name in SIZES if getattr(args, name) is not None}
+    options = ExportOptions(**given)
+    try:
+        resolve_sizes(mech, rigid_parts(mech), options)
+    except ValueError as exc:
+        raise InputError(f"{args.mechanism}: {exc}") from None
+    out = Path(args.out) if args.out else fresh_name(Path(f"{Path(args.mechanism).stem}-export"))
+    try:
+        with staged_output(out, args.force) as stage:
+            result = export_mechanism(mech, stage, formats, options)
+            timings = {"export_s": result.seconds, **_extras(mech, stage)}
+            timings["total_s"] = time.perf_counter() - start
+            write_atomic(stage / "report.json", json.dumps(_report(result, timings), indent=2))
+    except ValueError as exc:
+        print(f"{args.mechanism}: cannot export: {exc}")
+        return 1
+    kinds = ", ".join(f"{n} {kind}" for kind, n in _counts(result.parts).items())
+    print(f"{out}: {result.layers} layers; parts: {kinds}; exported in {result.seconds:.2f} s")
+    return 0
+
+
+def _extras(mech: Mechanism, stage: Path) -> dict[str, float]:
+    """animation.html (the exported parts when there is a model) and curve.png; their timings."""
+    from linkd.verify.animation import parts_from_model, write_animation
+    from linkd.verify.plot import write_curve_plot
+
+    start = time.perf_counter()
+    model = stage / "mechanism.xml"
+    parts = parts_from_model(model, mech) if model.exists() else None
+    write_animation(mech, stage / "animation.html", parts=parts)
+    middle = time.perf_counter()
+    write_curve_plot(mech, stage / "curve.png")
+    return {"animation_s": middle - start, "plot_s": time.perf_counter() - middle}
+
+
+def _counts(parts: list[dict]) -> dict[str, int]:
+    """Number of parts of each kind (ground, link, plate, pin)."""
+    counts: dict[str, int] = {}
+    for part in parts:
+        counts[part["kind"]] = counts.get(part["kind"], 0) + 1
+    return counts
+
+
+def _report(result, timings: dict[str, float]) -> dict:
+    return {
+        "export": {
+            "layers": result.layers,
+            "layers_minimal": result.minimal,
+            "parts": _counts(result.parts),
+            "min_gap": result.min_gap if result.min_gap < float("inf") else None,
+            "sizes": result.sizes,
+            "files": [str(f) for f in result.files],
+        },
+        "timings": timings,
+    }

@@ -1,0 +1,170 @@
+"""LinkD: curve encoder + causal transformer + per-node DDPM head, trained by teacher forcing.
+
+The head diffuses a node's 24 entries in a symmetric form: the binary entries (validity,
+ground, links) as -1 / +1 and the position as it is. Link entries to joints j >= t do not
+exist for node t: they are zeroed in the head's input, ignored by the loss and decoded as -1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from linkd.graph import ADJ, FEATURES, MAX_NODES, TYPE, VALID, XY
+from linkd.model.backbone import CausalBackbone
+from linkd.model.diffusion import DenoiseUNet, cosine_alpha_bar, ddim_sample
+from linkd.model.encoder import CurveEncoder
+
+BINARY = torch.tensor([k not in (2, 3) for k in range(FEATURES)])
+
+
+@dataclass
+class LinkDConfig:
+    dim: int = 128
+    layers: int = 4
+    heads: int = 4
+    encoder_layers: int = 2
+    cross_attention: bool = False  # nodes also attend to the curve's patch tokens (not in paper)
+    head_widths: tuple[int, ...] = (128, 64, 32)
+    head_cond: int = 64  # width of the (context + timestep) vector that FiLMs the head
+    diffusion_steps: int = 1000
+    sample_steps: int = 10  # default DDIM steps at inference
+    sample_eta: float = 0.0  # DDIM stochasticity at inference (0: deterministic given noise)
+    link_weight: float = 1.0  # BCE weight of present links; above 1 biases x0 towards links
+    position_weight: float = 2.0
+    huber_beta: float = 0.05
+
+
+def link_mask(index: torch.Tensor) -> torch.Tensor:
+    """(M, MAX_NODES) True where node `index` may link: earlier joints j < index."""
+    return torch.arange(MAX_NODES, device=index.device)[None] < index[:, None]
+
+
+def to_target(rows: torch.Tensor) -> torch.Tensor:
+    """Graph-matrix rows -> the diffused form: binary entries +-1, positions (0 for padding)."""
+    target = (rows == 1).to(rows.dtype) * 2 - 1
+    target[..., XY] = rows[..., XY] * (rows[..., VALID : VALID + 1] > 0.5)
+    return target
+
+
+def to_rows(x0: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """Clean estimates (M, 24) of nodes `index` (M,) -> decoded graph-matrix rows."""
+    valid = x0[:, VALID] > 0
+    rows = torch.full_like(x0, -1.0)
+    rows[:, VALID] = valid.to(x0.dtype)
+    rows[:, TYPE] = torch.where(valid, (x0[:, TYPE] > 0).to(x0.dtype), -1.0)
+    rows[:, XY] = torch.where(valid[:, None], x0[:, XY].clamp(-1, 1), 0.0)
+    links = (x0[:, ADJ] > 0).to(x0.dtype)
+    rows[:, ADJ] = torch.where(valid[:, None] & link_mask(index), links, -1.0)
+    return rows
+
+
+class LinkD(nn.Module):
+    def __init__(self, config: LinkDConfig) -> None:
+        super().__init__()
+        self.config = config
+        c = config
+        self.encoder = CurveEncoder(c.dim, c.encoder_layers, c.heads)
+        self.backbone = CausalBackbone(c.dim, c.layers, c.heads, c.cross_attention)
+        self.head = DenoiseUNet(FEATURES, c.dim, tuple(c.head_widths), c.head_cond)
+        self.register_buffer("alpha_bar", cosine_alpha_bar(c.diffusion_steps), persistent=False)
+        self.register_buffer("binary", BINARY.clone(), persistent=False)
+
+    def clean_estimate(self, out: torch.Tensor) -> torch.Tensor:
+        """Head output -> x_0 estimate: tanh(logit / 2) = 2p - 1 for binary entries."""
+        return torch.where(self.binary, torch.tanh(out / 2), out.clamp(-1, 1))
+
+    def head_input(self, x_t: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        keep = torch.ones_like(x_t, dtype=torch.bool)
+        keep[:, ADJ] = link_mask(index)
+        return x_t * keep
+
+    def forward(
+        self, graphs: torch.Tensor, curves: torch.Tensor, draws: int = 4
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Teacher-forced loss of (B, 20, 24) graphs given (B, 200, 2) curves.
+
+        Every valid node and the first padding row (the stop signal) is a target; each is
+        noised at `draws` random timesteps (the head is cheap next to the transformer).
+        """
+        c = self.config
+        h = self.backbone(graphs[:, :-1], self.encoder(curves))
+        valid = graphs[..., VALID] > 0.5
+        before = torch.cat([torch.ones_like(valid[:, :1]), valid[:, :-1]], 1)
+        active = before.cumprod(1).bool()
+        index = torch.arange(valid.shape[1], device=graphs.device).expand_as(valid)[active]
+        index = index.repeat(draws)
+        context = h[active].repeat(draws, 1)
+        x0 = to_target(graphs[active]).repeat(draws, 1)
+        is_valid = valid[active].repeat(draws)
+        t = torch.randint(0, c.diffusion_steps, (len(x0),), device=graphs.device)
+        a = self.alpha_bar[t][:, None]
+        x_t = a.sqrt() * x0 + (1 - a).sqrt() * torch.randn_like(x0)
+        out = self.head(self.head_input(x_t, index), t, context)
+
+        target01 = (x0 > 0).to(x0.dtype)
+        parts = {"validity": F.binary_cross_entropy_with_logits(out[:, VALID], target01[:, VALID])}
+        v = is_valid
+        parts["type"] = F.binary_cross_entropy_with_logits(out[v, TYPE], target01[v, TYPE])
+        parts["position"] = F.smooth_l1_loss(out[v, XY], x0[v, XY], beta=c.huber_beta)
+        links = link_mask(index[v])
+        weight = torch.where(target01[v, ADJ] > 0, c.link_weight, 1.0)[links]
+        parts["links"] = F.binary_cross_entropy_with_logits(
+            out[v, ADJ][links], target01[v, ADJ][links], weight=weight
+        )
+        total = (
+            parts["validity"]
+            + parts["type"]
+            + parts["links"]
+            + c.position_weight * parts["position"]
+        )
+        return total, {k: val.detach() for k, val in parts.items()}
+
+    def encode(self, curves: torch.Tensor) -> torch.Tensor:
+        """(B, 200, 2) curves -> (B, 1 + P, dim): E(C) then the curve's patch tokens."""
+        return self.encoder(curves)
+
+    def new_cache(self) -> list[dict]:
+        return [{} for _ in self.backbone.blocks]
+
+    @torch.no_grad()
+    def denoise(
+        self,
+        context: torch.Tensor,
+        index: torch.Tensor,
+        steps: int | None = None,
+        generator: torch.Generator | None = None,
+    ) -> torch.Tensor:
+        """Sample decoded rows (M, 24) for nodes `index` (M,) from their contexts (M, dim)."""
+        noise = torch.randn(
+            (len(context), FEATURES), generator=generator, device=context.device
+        ).to(context.dtype)
+
+        def predict(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+            return self.clean_estimate(self.head(self.head_input(x_t, index), t, context))
+
+        c = self.config
+        x0 = ddim_sample(
+            predict, noise, self.alpha_bar, steps or c.sample_steps, c.sample_eta, generator
+        )
+        return to_rows(x0, index)
+
+
+def save_checkpoint(path: str | Path, model: LinkD, **extra: object) -> None:
+    """Model config and weights (plus anything in `extra`, e.g. optimiser state) in one file."""
+    state = {"config": asdict(model.config), "model": model.state_dict(), **extra}
+    torch.save(state, Path(path))
+
+
+def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[LinkD, dict]:
+    """The model of a checkpoint (in eval mode) and the raw checkpoint dictionary."""
+    state = torch.load(Path(path), map_location=device, weights_only=True)
+    config = dict(state["config"])
+    config["head_widths"] = tuple(config["head_widths"])
+    model = LinkD(LinkDConfig(**config)).to(device)
+    model.load_state_dict(state["model"])
+    return model.eval(), state

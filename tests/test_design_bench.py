@@ -1,0 +1,49 @@
+"""`linkd bench design`: which curves it runs on and the figures it reports."""
+
+import numpy as np
+import pytest
+
+from linkd.curves import resample, write_curve
+from linkd.design.bench import curve_files, run_bench, summary_table
+from linkd.design.pipeline import DesignOptions
+from linkd.design.select import end_effector_path
+from linkd.errors import InputError
+from linkd.generator import GeneratorSettings, generate
+from linkd.graph import from_graph
+
+
+def test_curve_files_takes_files_and_folders(tmp_path):
+    folder = tmp_path / "set"
+    folder.mkdir()
+    for name in ("b.csv", "a.csv", "index.csv", "notes.txt"):
+        (folder / name).write_text("x,y\n")
+    single = tmp_path / "z.csv"
+    single.write_text("x,y\n")
+    assert [p.name for p in curve_files([str(folder), str(single)])] == ["a.csv", "b.csv", "z.csv"]
+    assert len(curve_files([str(folder)], limit=1)) == 1
+    with pytest.raises(InputError):
+        curve_files([str(tmp_path / "missing")])
+
+
+def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
+    settings = GeneratorSettings(min_nodes=5, max_nodes=6)
+    graphs = generate(6, seed=11, settings=settings).graphs
+    files = []
+    for k in range(2):
+        path = end_effector_path(from_graph(graphs[k]), 600)[0]
+        files.append(tmp_path / f"{k}.csv")
+        write_curve(files[-1], 25.0 * resample(path, 120))
+
+    def proposer(curves, per_curve, seed):
+        return graphs[np.resize(np.arange(len(graphs)), len(curves) * per_curve)]
+
+    lines = []
+    options = DesignOptions(candidates=6, refine=False, formats=frozenset({"mjcf"}))
+    results = run_bench(files, options, proposer, say=lines.append)
+    assert len(results["curves"]) == 2 and len(lines) == 2
+    total = results["total"]
+    assert total["valid_rate"] == 1.0 and total["verified_rate"] == 1.0
+    for row in results["curves"]:
+        assert 0 <= row["chamfer"] < 1 and 0 <= row["chamfer_200"] < 1
+        assert 5 <= row["nodes"] <= 6 and row["seconds"] > 0
+    assert "verified        100.0%" in summary_table(total)

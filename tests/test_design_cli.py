@@ -1,0 +1,61 @@
+"""`linkd design` on the command line: exit codes, messages, the output folder's name."""
+
+import importlib.resources
+import json
+from pathlib import Path
+
+import pytest
+
+from linkd.cli import main
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "assets" / "examples"
+SHIPPED = importlib.resources.files("linkd.assets") / "linkd.pt"
+
+BAD_CURVES = {
+    "nan.csv": "x,y\n0,0\n1,0\nnan,1\n" + "".join(f"{k},{k * k}\n" for k in range(2, 10)),
+    "one_column.csv": "".join(f"{k}\n" for k in range(12)),
+    "few.csv": "0,0\n1,0\n1,1\n0,1\n",
+    "line.csv": "".join(f"{k},{2 * k}\n" for k in range(12)),
+    "same.csv": "3,4\n" * 12,
+    "text.csv": "x,y\n" + "".join(f"{k},{k % 3}\n" for k in range(10)) + "a,b\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_CURVES))
+def test_bad_curve_exits_2_with_one_line_and_writes_nothing(tmp_path, monkeypatch, capsys, name):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / name).write_text(BAD_CURVES[name])
+    assert main(["design", name]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and name in err[0]
+    assert [p.name for p in tmp_path.iterdir()] == [name]
+
+
+def test_missing_curve_and_bad_options_exit_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert main(["design", "absent.csv"]) == 2
+    assert "absent.csv" in capsys.readouterr().err
+    curve = str(EXAMPLES / "ellipse.csv")
+    for args in (["--candidates", "0"], ["--export", "step"], ["--time-budget", "0"],
+                 ["--units", "furlong"], ["--strategy", "best"], ["--top", "-1"]):  # fmt: skip
+        assert main(["design", curve, *args]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(not SHIPPED.is_file(), reason="the LinkD checkpoint is not shipped yet")
+def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    curve = str(EXAMPLES / "ellipse.csv")
+    args = ["design", curve, "--export", "mjcf,stl", "--candidates", "32"]
+    assert main(args) == 0
+    out = tmp_path / "ellipse-design"
+    report = json.loads((out / "report.json").read_text())
+    assert report["verification"]["passed"]
+    assert report["design"]["chamfer"] < 0.1
+    assert (out / "mechanism.xml").is_file() and list((out / "meshes").glob("*.stl"))
+    assert "verified" in capsys.readouterr().out
+    # A second run does not overwrite the first: it takes a fresh name.
+    assert main([*args, "--export", "stl"]) == 0
+    assert (tmp_path / "ellipse-design-2" / "mechanism.json").is_file()
+    assert not (tmp_path / "ellipse-design-2" / "mechanism.xml").exists()

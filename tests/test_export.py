@@ -1,0 +1,212 @@
+"""Export without simulation: parts, layers, meshes, files (linkd.export)."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from linkd import classic
+from linkd.export import ExportOptions, export_mechanism, hinge_angles, joint_paths
+from linkd.export.layers import (
+    SWEEP_ANGLES,
+    assign_layers,
+    convex_hull,
+    hull_edges,
+    plates,
+    segment_distance,
+)
+from linkd.export.meshes import SEGMENTS
+from linkd.export.options import resolve_sizes
+from linkd.export.parts import CRANK, assemble, rigid_parts
+from linkd.geometry import Similarity, rotation
+from linkd.mechanism import UNITS_IN_METRES, Mechanism
+
+CLASSICS = [classic.crank_rocker, classic.jansen_leg, classic.watt_six_bar,
+            classic.stephenson_six_bar]  # fmt: skip
+
+# A generated mechanism whose ternary crank sweeps over the other ground pivot: the pins of the
+# two ground joints cannot both stand in the base plate, one must hang from a cover plate.
+CRANK_PLATE = Mechanism(
+    [(29.054, 3.317), (9.352, 0.151), (30.119, -35.315), (38.261, 7.190), (6.904, -30.185),
+     (25.920, 14.455)],
+    [1, 0, 1, 0, 0, 0], [(0, 1), (0, 4), (1, 3), (1, 4), (1, 5), (2, 3), (3, 5)], (0, 1), 5,
+)  # fmt: skip
+
+
+def _kinds(mech):
+    return sorted((p.kind, p.joints) for p in rigid_parts(mech))
+
+
+def test_rigid_parts_of_classics():
+    assert _kinds(classic.crank_rocker()) == [
+        ("ground", (0, 2)), ("link", (0, 1)), ("link", (2, 3)), ("plate", (1, 3, 4))
+    ]  # fmt: skip
+    jansen = _kinds(classic.jansen_leg())
+    assert [j for k, j in jansen if k == "plate"] == [(2, 3, 5), (4, 6, 7)]
+    assert sum(k == "link" for k, _ in jansen) == 5
+    assert ("plate", (2, 3, 4)) in _kinds(classic.watt_six_bar())  # ternary rocker
+    assert ("plate", (1, 3, 4)) in _kinds(classic.stephenson_six_bar())  # ternary coupler
+
+
+def test_joint_hung_on_two_ground_joints_is_part_of_the_ground():
+    mech = classic.crank_rocker()
+    braced = mech.replace(
+        positions=np.vstack([mech.positions, [2.0, -1.0]]),
+        fixed=np.append(mech.fixed, False),
+        links=[*mech.links, (0, 5), (2, 5)],
+    )
+    assert rigid_parts(braced)[0].joints == (0, 2, 5)
+
+
+@pytest.mark.parametrize("build", [*CLASSICS, lambda: CRANK_PLATE])
+def test_hinge_tree_leaves_one_freedom(build):
+    mech = build()
+    assembly = assemble(mech)
+    assert len(assembly.hinges) == len(assembly.parts) - 1
+    assert len(assembly.hinges) - 2 * len(assembly.loops) == 1
+    crank = next(h for h in assembly.hinges if h.name == CRANK)
+    assert crank.parent == 0 and crank.joint == mech.motor[0]
+    assert set(assembly.parts[crank.child].joints) >= set(mech.motor)
+    for loop in assembly.loops:
+        pin = next(p for p in assembly.pins if p.joint == loop.joint)
+        assert loop.hub == pin.hub and loop.part in pin.members
+
+
+def test_hinge_angles_start_at_the_assembly_pose_and_follow_the_crank():
+    mech = classic.jansen_leg()
+    angles = np.linspace(0, 2 * np.pi, 7)
+    result = hinge_angles(mech, angles)
+    assert np.array_equal(result[CRANK], angles)
+    for values in result.values():
+        assert abs(values[0]) < 1e-12
+        assert np.allclose(np.angle(np.exp(1j * values[-1])), 0, atol=1e-9)
+
+
+def test_segment_distance_matches_dense_sampling():
+    rng = np.random.default_rng(0)
+    a1, a2, b1, b2 = rng.normal(size=(4, 100)) + 1j * rng.normal(size=(4, 100))
+    t = np.linspace(0, 1, 121)[:, None]
+    pa, pb = a1 + t * (a2 - a1), b1 + t * (b2 - b1)  # (121, 100) complex points
+    dense = np.abs(pa[:, None] - pb[None]).min((0, 1))
+    exact = segment_distance(a1, a2, b1, b2)
+    assert np.all(exact <= dense + 1e-12)
+    step = np.abs(np.concatenate([a2 - a1, b2 - b1])).max() / 120
+    assert np.all(dense - exact <= step)
+    assert np.all(segment_distance(a1, a2, a1, a2) == 0)
+
+
+def test_convex_hull_is_counter_clockwise_and_drops_interior_points():
+    points = np.array([[0, 0], [1, 0], [0.5, 0.5], [1, 1], [0, 1], [0.5, 0.0]])
+    assert convex_hull(points) == [0, 1, 3, 4]
+    assert sorted(convex_hull(np.array([[0, 0], [2, 0], [1, 0]]))) == [0, 1]
+
+
+def _swept_layout(mech):
+    assembly = assemble(mech)
+    sizes = resolve_sizes(mech, assembly.parts, None)
+    paths = joint_paths(mech, np.arange(SWEEP_ANGLES) * (2 * np.pi / SWEEP_ANGLES))
+    return assembly, sizes, paths, assign_layers(assembly, paths, sizes)
+
+
+def _dense_outline(assembly, part, paths, per_edge=20):
+    """(K, T, 2) points along a part's joint hull, for a brute-force distance."""
+    t = np.linspace(0, 1, per_edge)[:, None, None]
+    edges = [(a, b) for p, a, b in hull_edges(assembly, paths[:, 0]) if p == part]
+    return np.concatenate([paths[a] + t * (paths[b] - paths[a]) for a, b in edges])
+
+
+@pytest.mark.parametrize("build", [classic.jansen_leg, classic.watt_six_bar, lambda: CRANK_PLATE])
+def test_parts_of_one_layer_stay_apart_and_pins_clear(build):
+    """Brute force over the sweep: plates sharing a layer keep a width plus the clearance
+    between their joint hulls; no pin crosses a layer where a part it does not join passes."""
+    mech = build()
+    assembly, sizes, paths, layout = _swept_layout(mech)
+    n = len(assembly.parts)
+    outline = [_dense_outline(assembly, p, paths) for p in range(n)]
+    for p in range(1, n):
+        for q in range(p + 1, n):
+            if layout.layers[p] == layout.layers[q]:
+                gap = np.linalg.norm(outline[p][:, None] - outline[q][None], axis=-1).min()
+                assert gap >= sizes.link_width + sizes.clearance
+    for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
+        for q in range(1, n):
+            if q not in pin.members and lo <= layout.layers[q] <= hi:
+                gap = np.linalg.norm(outline[q] - paths[pin.joint], axis=-1).min()
+                assert gap >= (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance
+
+
+def test_ground_pins_stand_in_the_base_or_hang_from_the_cover():
+    assembly, _, _, layout = _swept_layout(CRANK_PLATE)
+    assert layout.top_joints  # this one needs the cover
+    names = {p.name: p.layer for p in plates(assembly, layout)}
+    assert names["ground"] == 0 and names["ground_cover"] == layout.count - 1
+    for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
+        if 0 in pin.members:
+            assert lo == 0 or hi == layout.count - 1
+    jansen = _swept_layout(classic.jansen_leg())[3]
+    assert jansen.top_joints == () and jansen.minimal
+
+
+def test_reflected_rotated_mechanism_has_the_same_parts_and_layers():
+    mech = classic.jansen_leg()
+    moved = mech.transformed(Similarity(3.0, rotation(0.7, reflect=True), np.array([5.0, -2.0])))
+    a, b = _swept_layout(mech), _swept_layout(moved)
+    assert a[0].parts == b[0].parts
+    assert a[3].count == b[3].count
+
+
+def test_export_writes_the_contract_files(tmp_path):
+    mech = classic.jansen_leg()
+    result = export_mechanism(mech, tmp_path)
+    names = {str(f) for f in result.files}
+    assert {"mechanism.json", "mechanism.xml", "scene.xml"} <= names
+    assert all((tmp_path / f).is_file() for f in result.files)
+    saved = json.loads((tmp_path / "mechanism.json").read_text())
+    assert saved["layers"] == result.layers >= 2
+    assert saved["parts"] == result.parts
+    again = Mechanism.load(tmp_path / "mechanism.json")
+    assert np.array_equal(again.positions, mech.positions) and again.links == mech.links
+    pins = [p for p in result.parts if p["kind"] == "pin"]
+    assert len(pins) == 7 and all(p["layers"][0] < p["layers"][1] for p in pins)
+    meshes = {p["mesh"] for p in result.parts if "mesh" in p}
+    assert meshes == {n for n in names if n.endswith(".stl")} and len(meshes) == 8
+
+
+def test_stl_plates_are_watertight_with_the_expected_volume(tmp_path):
+    mech = classic.crank_rocker().transformed(Similarity(25.0))
+    result = export_mechanism(mech, tmp_path, {"stl"})
+    sizes = result.sizes
+    unit = UNITS_IN_METRES[mech.units]
+    w, d, t = (sizes[k] * unit for k in ("link_width", "hole_diameter", "thickness"))
+    polygon = SEGMENTS / (2 * np.pi) * np.sin(2 * np.pi / SEGMENTS)  # inscribed circle area
+    for part in result.parts:
+        if "mesh" not in part:
+            continue
+        mesh = trimesh.load(tmp_path / part["mesh"])
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        if part["kind"] == "link":
+            length = np.linalg.norm(np.subtract(*mech.positions[part["joints"]])) * unit
+            area = length * w + polygon * np.pi * (w**2 - 2 * d**2) / 4
+            assert mesh.volume == pytest.approx(area * t, rel=5e-3)
+    assert not (tmp_path / "mechanism.xml").exists()
+
+
+def test_mjcf_alone_uses_boxes_and_cylinders(tmp_path):
+    import mujoco
+
+    export_mechanism(classic.crank_rocker().transformed(Similarity(25.0)), tmp_path, {"mjcf"})
+    assert not (tmp_path / "meshes").exists()
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "mechanism.xml"))
+    kinds = {mujoco.mjtGeom(k).name for k in model.geom_type}
+    assert kinds == {"mjGEOM_BOX", "mjGEOM_CYLINDER"}
+
+
+def test_invalid_input_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="locks"):
+        export_mechanism(classic.non_grashof_four_bar(), tmp_path)
+    with pytest.raises(ValueError, match="format"):
+        export_mechanism(classic.crank_rocker(), tmp_path, {"step"})
+    with pytest.raises(ValueError, match="hole"):
+        export_mechanism(classic.crank_rocker(), tmp_path, options=ExportOptions(hole_diameter=9))
+    assert not any(tmp_path.iterdir())

@@ -1,0 +1,66 @@
+"""`curve.png`: the target curve, the traced path and the mechanism in its assembly pose."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from linkd.mechanism import Mechanism
+
+from .analytic import joint_paths, rigid_parts
+
+ANGLES = 400
+
+
+def write_curve_plot(mech: Mechanism, path: str | Path, target: np.ndarray | None = None) -> None:
+    """Draw the plot with matplotlib (Agg, no display needed) and write it as PNG to `path`."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    paths = joint_paths(mech, ANGLES)
+    traced = paths[mech.end_effector]
+    fig = Figure(figsize=(6, 6), dpi=120)
+    ax = fig.add_subplot()
+    if target is not None:
+        closed = np.vstack([target[:, :2], target[:1, :2]])
+        ax.plot(*closed.T, color="tab:blue", lw=2.5, alpha=0.6, label="target curve")
+    ax.plot(*np.vstack([traced, traced[:1]]).T, color="tab:red", lw=1.2, label="traced path")
+    for joints in rigid_parts(mech)[1:]:
+        if len(joints) > 2:  # a plate: shade its outline
+            corners = mech.positions[list(joints)]
+            centre = corners.mean(0)
+            order = np.argsort(np.arctan2(*(corners - centre).T[::-1]))
+            ax.fill(*corners[order].T, color="0.6", alpha=0.35, lw=0)
+    for i, j in mech.links:
+        ax.plot(*mech.positions[[i, j]].T, color="0.25", lw=2, solid_capstyle="round")
+    moving = ~mech.fixed
+    ax.plot(*mech.positions[moving].T, "o", color="white", mec="0.25", ms=6, ls="none")
+    ax.plot(*mech.positions[mech.fixed].T, "^", color="0.25", ms=9, ls="none", label="ground")
+    pivot, tip = mech.motor
+    ax.plot(*mech.positions[[pivot, tip]].T, color="tab:orange", lw=3, label="crank")
+    ax.plot(*mech.positions[mech.end_effector], "*", color="tab:red", ms=12, label="end effector")
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"x ({mech.units})")
+    ax.set_ylabel(f"y ({mech.units})")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{mech.n_nodes}-joint linkage: target and traced curve")
+    fig.tight_layout()
+    _save_atomic(fig, Path(path))
+
+
+def _save_atomic(fig: object, path: Path) -> None:
+    """Write through a temporary file beside `path`, renamed into place once complete."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            fig.savefig(handle, format="png")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
