@@ -23,12 +23,7 @@ from linkd.model import LinkD, LinkDConfig, save_checkpoint
 TINY = LinkDConfig(dim=32, layers=1, heads=2, encoder_layers=1, head_widths=(32, 16), head_cond=16)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")

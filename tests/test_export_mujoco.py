@@ -1,7 +1,6 @@
 """The exported model in MuJoCo: it loads cleanly, moves with one freedom, closes its loops,
 follows the analytic path and never collides (CONTRACT §3)."""
 
-from contextlib import contextmanager
 from pathlib import Path
 
 import mujoco
@@ -17,6 +16,7 @@ from linkd.export.parts import assemble
 from linkd.geometry import Similarity
 from linkd.graph import from_graph
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
+from linkd.verify.checks import capture_warnings
 from linkd.verify.pose import loop_closure, solve_pose
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "assets" / "examples"
@@ -56,24 +56,12 @@ def _cases() -> dict:
 CASES = _cases()
 
 
-@contextmanager
-def mujoco_warnings():
-    """MuJoCo's warnings, collected instead of printed."""
-    messages: list[str] = []
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(messages.append)
-    try:
-        yield messages
-    finally:
-        mujoco.set_mju_user_warning(previous)
-
-
 @pytest.fixture(scope="module", params=sorted(CASES))
 def exported(request, tmp_path_factory):
     mech, formats = CASES[request.param]
     out = tmp_path_factory.mktemp(request.param)
     export_mechanism(mech, out, formats)
-    with mujoco_warnings() as messages:
+    with capture_warnings() as messages:
         model = mujoco.MjModel.from_xml_path(str(out / "mechanism.xml"))
     return mech, model, messages, out
 
@@ -99,7 +87,7 @@ def test_model_loads_without_warnings_with_the_contract_names(exported):
     assert model.site("end_effector").id >= 0
     assert model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_FILTERPARENT
     assert not any(mujoco.mjtGeom(k).name == "mjGEOM_CAPSULE" for k in model.geom_type)
-    with mujoco_warnings() as scene_messages:
+    with capture_warnings() as scene_messages:
         mujoco.MjModel.from_xml_path(str(out / "scene.xml"))
     assert scene_messages == []
 
@@ -109,7 +97,7 @@ def test_random_motor_noise_for_one_second(exported):
     _, model, _, _ = exported
     data = mujoco.MjData(model)
     rng = np.random.default_rng(0)
-    with mujoco_warnings() as messages:
+    with capture_warnings() as messages:
         for _ in range(round(1.0 / model.opt.timestep)):
             data.ctrl[:] = 0.95 * data.ctrl + 0.05 * rng.normal(0.0, 2.0, model.nu)
             mujoco.mj_step(model, data)
@@ -147,7 +135,7 @@ def test_motor_ramp_turns_the_crank_once_with_closed_loops(exported):
     ee = model.site("end_effector").id
     steps = round((RAMP_S + HOLD_S) / model.opt.timestep)
     angle, ends, violation = np.zeros(steps), np.zeros((steps, 2)), np.zeros(steps)
-    with mujoco_warnings() as messages:
+    with capture_warnings() as messages:
         for k in range(steps):
             data.ctrl[0] = 2 * np.pi * min(data.time / RAMP_S, 1.0)
             mujoco.mj_step(model, data)

@@ -11,15 +11,7 @@ from linkd.graph import ADJ, MAX_NODES, VALID, to_graph
 from linkd.model import LinkD, LinkDConfig, load_checkpoint, save_checkpoint
 from linkd.model.linkd import to_rows, to_target
 
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """Small tensors: one thread avoids OpenMP spin-waiting on a busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 TINY = LinkDConfig(dim=32, layers=2, heads=2, encoder_layers=1, head_widths=(32, 16), head_cond=16)
 

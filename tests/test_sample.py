@@ -16,19 +16,13 @@ from linkd.validator import validate_mechanism
 TINY = LinkDConfig(dim=32, layers=2, heads=2, encoder_layers=1, head_widths=(32, 16), head_cond=16)
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_thread")
 
 
 @pytest.fixture(scope="module")
 def model_and_curves():
     """A small model taught two mechanisms, each for its own curve: it samples them with
     some noise, so some designs are valid and some are not."""
-    torch.set_num_threads(1)
     torch.manual_seed(0)
     mechanisms = [classic.jansen_leg(), classic.watt_six_bar()]
     graphs = torch.tensor(np.stack([to_graph(m)[0] for m in mechanisms]), dtype=torch.float32)

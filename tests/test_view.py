@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import math
 import re
 import signal
 import subprocess
@@ -29,6 +31,20 @@ def test_html_only_writes_the_page(tmp_path: Path, capsys) -> None:
     page = (out / "animation.html").read_text()
     assert "new MeshCat.Viewer" in page and "handle_command_bytearray" in page
     assert capsys.readouterr().out.strip().endswith("animation.html")
+
+
+def test_target_defaults_to_the_curve_the_report_names(tmp_path: Path) -> None:
+    out = folder_with(crank_rocker(), tmp_path)
+    curve = tmp_path / "curve.csv"
+    curve.write_text("\n".join(f"{2 * math.cos(t)},{math.sin(t)}" for t in range(0, 60, 3)))
+    page = out / "animation.html"
+    assert main(["view", str(out), "--html"]) == 0
+    bare = page.read_bytes()
+    assert main(["view", str(out), "--html", "--curve", str(curve)]) == 0
+    explicit = page.read_bytes()
+    (out / "report.json").write_text(json.dumps({"curve": {"file": str(curve)}}))
+    assert main(["view", str(out), "--html"]) == 0
+    assert page.read_bytes() == explicit != bare
 
 
 def test_refuses_missing_and_invalid_input(tmp_path: Path, capsys) -> None:

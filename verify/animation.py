@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import html
+import uuid
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -242,7 +243,33 @@ def scene_commands(
     if target is not None:
         commands.append(_line(np.asarray(target)[:, :2], lift, 0x1F77B4, root.append("target")))
     commands.append(SetAnimation(animation, play=True, repetitions=float("inf")))
-    return [command.lower() for command in commands]
+    return _stable_ids([command.lower() for command in commands])
+
+
+def _stable_ids(lowered: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The commands with meshcat's time-based object ids replaced by numbered ones (references
+    between objects kept), so the same mechanism always gives the same page."""
+    ids: dict[str, str] = {}
+
+    def collect(node: Any) -> None:
+        if isinstance(node, dict):
+            if isinstance(node.get("uuid"), str):
+                ids.setdefault(node["uuid"], str(uuid.UUID(int=len(ids) + 1)))
+            for value in node.values():
+                collect(value)
+        elif isinstance(node, list):
+            for value in node:
+                collect(value)
+
+    def renamed(node: Any) -> Any:
+        if isinstance(node, dict):
+            return {key: renamed(value) for key, value in node.items()}
+        if isinstance(node, list):
+            return [renamed(value) for value in node]
+        return ids.get(node, node) if isinstance(node, str) else node
+
+    collect(lowered)
+    return renamed(lowered)
 
 
 def _line(points: np.ndarray, z: float, colour: int, path: Any) -> Any:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
+import json
 import sys
 import time
 from pathlib import Path
@@ -14,7 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="play an output folder's mechanism in the browser (meshcat)")
     p.add_argument("out", help="output folder holding mechanism.json")
     p.add_argument("--html", action="store_true", help="only write OUT/animation.html")
-    p.add_argument("--curve", help="target curve CSV to draw beside the traced path")
+    p.add_argument("--curve", help="target curve CSV to draw beside the traced path (default: the "
+                   "one OUT/report.json names, if it exists)")
     p.set_defaults(run=run)
 
 
@@ -23,11 +25,12 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     mech = Mechanism.load(out / "mechanism.json")
+    curve = args.curve or _designed_for(out)
     target = None
-    if args.curve:
+    if curve:
         from linkd.curves import read_curve
 
-        target = read_curve(args.curve)
+        target = read_curve(curve)
     try:
         if args.html:
             from linkd.verify.animation import write_animation
@@ -39,6 +42,15 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:  # the mechanism does not move through a revolution
         print(f"{out / 'mechanism.json'}: invalid: {exc}", file=sys.stderr)
         return 1
+
+
+def _designed_for(out: Path) -> str | None:
+    """The curve file `linkd design` wrote OUT for, if its report names one that still exists."""
+    try:
+        curve = json.loads((out / "report.json").read_text())["curve"]["file"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return curve if isinstance(curve, str) and Path(curve).is_file() else None
 
 
 def serve(mech: object, out: Path, target: object) -> int:

@@ -98,7 +98,11 @@ def design(
             found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source)
             report = {
                 "format": "linkd-design-report/1",
-                "curve": {"file": str(curve_path), "points": len(points), "units": o.units},
+                "curve": {
+                    "file": str(Path(curve_path).resolve()),
+                    "points": len(points),
+                    "units": o.units,
+                },
                 "design": summary(found),
                 "search": search,
                 "alternatives": alternatives,
