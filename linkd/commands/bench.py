@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("curves", nargs="*", help="curve CSV files, or folders of them")
     d.add_argument("--dataset", help="also the test split of this data set folder")
     d.add_argument("--limit", type=int, help="at most this many curves")
-    d.add_argument("--candidates", type=int, default=128, help="designs sampled per curve")
+    d.add_argument("--candidates", type=int, default=512, help="designs sampled per curve")
     d.add_argument("--strategy", default="node", choices=("node", "graph", "oneshot"))
     d.add_argument("--no-refine", dest="refine", action="store_false")
     d.add_argument("--time-budget", type=float, default=30.0, help="seconds per curve")

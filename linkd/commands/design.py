@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     units = ", ".join(UNITS_IN_METRES)
     p.add_argument("--units", default=DEFAULT_UNITS, help=f"the curve's units: {units}")
     p.add_argument("--strategy", default="node", help="LinkD sampling: node, graph or oneshot")
-    p.add_argument("--candidates", type=int, default=128, help="designs to sample")
+    p.add_argument("--candidates", type=int, default=512, help="designs to sample")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="deliver the best sample as it is, only placed on the curve")  # fmt: skip
     p.add_argument("--top", type=int, default=0, help="also write alternative topologies")

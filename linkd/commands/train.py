@@ -13,7 +13,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--preset",
         choices=PRESETS,
         default="cpu",
-        help="model size and schedule (default: cpu, about 2 hours on 2 cores)",
+        help="model size and schedule (default: cpu, about 40 minutes on one CPU core)",
     )
     p.add_argument("--data", default="data/v1", help="data set folder (from `linkd dataset`)")
     p.add_argument("--out", default="runs/linkd", help="run folder: checkpoints and log")

@@ -41,7 +41,7 @@ DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
 
 @dataclass(frozen=True)
 class DesignOptions:
-    candidates: int = 128  # designs sampled in all
+    candidates: int = 512  # designs sampled in all
     strategy: str = "node"
     refine: bool = True
     seed: int = 0
