@@ -25,6 +25,15 @@ def test_kinematics_target_prints_its_throughput(capsys):
     assert "40 mechanisms x 20 joints" in out and "valid          100.0%" in out
 
 
+def test_export_target_exports_and_verifies_unseen_mechanisms(capsys):
+    assert main(["bench", "export", "--count", "4", "--seed", "5"]) == 0
+    out = capsys.readouterr().out
+    outcomes = ("verified", "refused", "failed verification")
+    counts = [int(line.split()[-1]) for line in out.splitlines()
+              if line.strip().startswith(outcomes)]  # fmt: skip
+    assert sum(counts) == 4 and "failed verification" not in out
+
+
 @pytest.mark.skipif(not shutil.which("g++"), reason="torch.compile needs a C++ compiler")
 @pytest.mark.filterwarnings("ignore::DeprecationWarning")  # raised inside torch's compiler
 def test_compiled_kinematics_match_eager():

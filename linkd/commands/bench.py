@@ -9,10 +9,11 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bench", help="measure throughput (kinematics, generator, design)")
+    p = sub.add_parser("bench", help="measure throughput (kinematics, generator, export, design)")
     targets = p.add_subparsers(dest="target", required=True, parser_class=type(p))
 
     k = targets.add_parser("kinematics", help="forward kinematics + validation, mechanisms/s")
@@ -32,6 +33,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes")
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(run=generator)
+
+    e = targets.add_parser("export", help="export and verify random mechanisms no test has seen")
+    e.add_argument("--count", type=int, default=100, help="random mechanisms (4 to 20 joints)")
+    e.add_argument("--seed", type=int, default=2026)
+    e.add_argument("--size", type=float, default=100.0, help="half the box they span, in mm")
+    e.set_defaults(run=export)
 
     d = targets.add_parser("design", help="linkd design on curves: validity, error, time")
     d.add_argument("curves", nargs="*", help="curve CSV files, or folders of them")
@@ -138,6 +145,49 @@ def generator(args: argparse.Namespace) -> int:
     print(f"  seconds        {seconds:.2f} ({cpu:.2f} s of CPU time, workers included)")
     print(f"  throughput     {len(samples) / seconds:,.0f} mechanisms/s "
           f"({len(samples) / seconds * 3600 / 1e6:.2f} M per hour)")  # fmt: skip
+    return 0
+
+
+def export(args: argparse.Namespace) -> int:
+    """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
+    tangled for flat layers is refused by the export and counted as such."""
+    import tempfile
+    from collections import Counter
+
+    import numpy as np
+
+    from linkd.export import export_mechanism
+    from linkd.generator import generate
+    from linkd.geometry import Similarity
+    from linkd.graph import from_graph
+    from linkd.verify import verify_output
+
+    graphs = generate(args.count, args.seed).graphs
+    outcome, failed, layers, seconds = Counter(), Counter(), [], []
+    for graph in graphs:
+        mech = from_graph(graph, Similarity(scale=args.size))
+        with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
+            start = time.perf_counter()
+            try:
+                result = export_mechanism(mech, Path(out), {"mjcf", "stl"})
+            except ValueError:
+                outcome["refused (no flat layering)"] += 1
+                continue
+            report = verify_output(out, write=False)
+            seconds.append(time.perf_counter() - start)
+        layers.append(result.layers)
+        outcome["verified" if report.passed else "failed verification"] += 1
+        failed.update(report.failed)
+    print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
+    for name, count in sorted(outcome.items()):
+        print(f"  {name:28s} {count}")
+    if failed:
+        print("  failed checks                " + ", ".join(f"{k} {v}" for k, v in failed.items()))
+    if seconds:
+        print(f"  layers                       {min(layers)}..{max(layers)}, "
+              f"mean {np.mean(layers):.1f}")  # fmt: skip
+        print(f"  export + verify seconds      median {np.median(seconds):.2f}, "
+              f"max {max(seconds):.2f}")  # fmt: skip
     return 0
 
 
