@@ -111,6 +111,7 @@ class _Builder:
         points = np.array([self.local(plate.part, j) for j in plate.joints])
         hull = [points[k] for k in convex_hull(points)]
         sides = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
+        sides = sides if len(hull) > 1 else []  # a lone joint (the ground at one pivot): a boss
         zc = z + self.thickness / 2
         for k, (a, b) in enumerate(sides):
             length = np.linalg.norm(b - a)

@@ -202,6 +202,25 @@ def test_mjcf_alone_uses_boxes_and_cylinders(tmp_path):
     assert kinds == {"mjGEOM_BOX", "mjGEOM_CYLINDER"}
 
 
+def test_mjcf_alone_with_a_ground_frame_at_one_pivot(tmp_path):
+    """The motor pivot sits on a crank plate, so the ground part holds one joint: a boss."""
+    import mujoco
+
+    from linkd.verify import verify_output
+
+    mech = Mechanism(
+        [(-8.51, 5.92), (-0.94, -15.22), (-67.75, -40.7), (-13.99, 13.36), (12.08, -5.04),
+         (-9.28, 8.03), (-18.43, -5.92), (6.29, -30.06)],
+        [1, 0, 0, 0, 1, 0, 0, 0],
+        [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 5), (2, 6), (3, 6), (4, 5), (5, 7), (6, 7)],
+        (0, 1), 7,
+    )  # fmt: skip
+    export_mechanism(mech, tmp_path, {"mjcf"})
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "mechanism.xml"))
+    assert model.ngeom > 0
+    assert verify_output(tmp_path, write=False).passed
+
+
 def test_invalid_input_is_refused(tmp_path):
     with pytest.raises(ValueError, match="locks"):
         export_mechanism(classic.non_grashof_four_bar(), tmp_path)

@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
         time_budget=args.time_budget,
         top=args.top,
         rotations=0 if single else DesignOptions.rotations,
+        every_joint=not single,
         attempts=1 if single else DesignOptions.attempts,
         model=args.model,
     )

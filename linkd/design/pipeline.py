@@ -30,7 +30,7 @@ from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
 
 from .output import Delivered, deliver, finish, summary
-from .propose import Candidates, Proposer, model_proposer, place, propose
+from .propose import Candidates, Proposer, model_proposer, place, propose, sub_mechanisms
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
@@ -50,9 +50,11 @@ class DesignOptions:
     time_budget: float = 30.0  # seconds for the whole run
     top: int = 0  # alternatives with other topologies, under OUT/alternatives/
     rotations: int = 4  # turned copies of the target sampled for, each also mirrored
+    every_joint: bool = True  # also offer each sample's sub-mechanisms (any joint as end effector)
+    placed: int = 1024  # candidates aligned exactly: the sub-mechanisms most like the target
     refine_count: int = 32  # candidates refined together (each in two variants)
     per_topology: int = 2  # of which at most this many share a topology
-    attempts: int = 12  # designs tried (validated, exported, verified) before giving up
+    attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
 
@@ -138,7 +140,10 @@ def _search(
         graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
         note(f"{len(graphs)} designs")
     with stages.stage("align", "placing designs on the curve") as note:
-        candidates = place(LinkageBatch.from_graphs(graphs), target)
+        batch = LinkageBatch.from_graphs(graphs)
+        if o.every_joint:
+            batch = sub_mechanisms(batch, target, o.placed)
+        candidates = place(batch, target)
         search["proposed"], search["valid"] = len(graphs), len(candidates)
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
         note(f"{len(candidates)} valid{best}")

@@ -24,6 +24,7 @@ from linkd.validator import validate
 # (conditioning curves (C, 200, 2), samples per curve, seed) -> graph matrices (C * S, 20, 24)
 Proposer = Callable[[np.ndarray, int, int], np.ndarray]
 MOVES = 1e-6  # an end effector whose path spreads less than this (graph units) stands still
+HARMONICS = 16  # Fourier harmonics of the shape descriptor that pre-ranks sub-mechanisms
 
 
 @dataclass
@@ -68,6 +69,58 @@ def propose(
     curves = curves[: max(1, count)]
     per_curve = -(-max(1, count) // len(curves))
     return proposer(curves.astype(np.float32), per_curve, seed)
+
+
+def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> LinkageBatch:
+    """The `keep` sub-mechanisms of `batch` whose paths look most like the target.
+
+    Every moving joint of a valid dyadic linkage traces a curve of its own, and the joints it
+    hangs on (its ancestors, down to the crank and the ground) form a smaller valid linkage
+    with that joint as end effector. So one sample offers a design per joint, most of them
+    with fewer joints (easier to build) than the sample. They are ranked by a shape
+    descriptor blind to position, size, rotation, reflection and starting point, so that only
+    the best few reach the exact alignment.
+    """
+    result = validate(batch, keep_motion=True)
+    paths = torch.as_tensor(result.motion.paths)  # (B, N, T, 2)
+    spread = (paths - paths.mean(2, keepdim=True)).square().sum(-1).mean(-1).sqrt().numpy()
+    moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread > MOVES)
+    moving[:, :2] = False  # the crank tip only turns in a circle
+    rows, joints = np.nonzero(moving)
+    if len(rows) > keep:
+        curves = resample_closed(paths[rows, joints].double(), 64)
+        gap = _descriptor(curves) - _descriptor(torch.as_tensor(target)[None])
+        best = torch.topk(gap.norm(dim=1), keep, largest=False).indices.sort().values.numpy()
+        rows, joints = rows[best], joints[best]
+    n = batch.valid.shape[1]
+    parents = np.tril(batch.adjacency[rows], -1)  # dyadic order: parents come first
+    needed = np.zeros((len(rows), n), bool)
+    needed[np.arange(len(rows)), joints] = True
+    needed[:, :2] = True  # the motor
+    for _ in range(n):  # each pass adds the parents of what is needed
+        needed |= (parents & needed[:, :, None]).any(1)
+    order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
+    pick = order[:, :, None]
+    adjacency = np.take_along_axis(batch.adjacency[rows], pick, 1)
+    adjacency = np.take_along_axis(adjacency, order[:, None, :], 2)
+    valid = np.take_along_axis(needed, order, 1)
+    return LinkageBatch(
+        np.take_along_axis(batch.positions[rows], pick, 1),
+        np.take_along_axis(batch.fixed[rows], order, 1) & valid,
+        valid,
+        adjacency & valid[:, :, None] & valid[:, None, :],
+        valid.sum(1) - 1,  # the chosen joint comes last among those it needs
+    )
+
+
+def _descriptor(curves: torch.Tensor) -> torch.Tensor:
+    """(B, 2 * HARMONICS) Fourier magnitudes of closed curves (B, M, 2) equally spaced by arc
+    length, scaled by the first harmonics: unchanged by translation, scale, rotation, start
+    point, and (harmonics k and -k paired in sorted order) reflection and direction."""
+    z = torch.fft.fft(torch.complex(curves[..., 0], curves[..., 1]), dim=1).abs()
+    k = torch.arange(1, HARMONICS + 1)
+    pairs = torch.stack([z[:, k], z[:, -k]], -1).sort(-1).values.flatten(1)
+    return pairs / pairs[:, :2].sum(1, keepdim=True).clamp_min(1e-12)
 
 
 def place(batch: LinkageBatch, target: np.ndarray) -> Candidates:
