@@ -13,7 +13,7 @@ from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.curves import normalise, read_curve, resample, write_curve
 from linkd.design.pipeline import DesignOptions, design
-from linkd.design.propose import augmented, place
+from linkd.design.propose import augmented, place, sub_mechanisms
 from linkd.design.refine import RefineSettings
 from linkd.design.select import curve_error, end_effector_path, topology_key
 from linkd.export import export_mechanism
@@ -21,6 +21,7 @@ from linkd.generator import GeneratorSettings, generate
 from linkd.geometry import Similarity, rotation
 from linkd.graph import from_graph, to_graph
 from linkd.mechanism import Mechanism
+from linkd.validator import validate
 
 # The user's frame: millimetres, turned, mirrored and moved away from the origin.
 USER = Similarity(40.0, rotation(0.7, reflect=True), np.array([100.0, -20.0]))
@@ -75,6 +76,26 @@ def test_placing_recovers_a_known_similarity(pool, curve_file):
     n = len(expected)
     error = np.abs(placed.batch.positions[0, :n] - expected).max()
     assert error < 0.01 * np.abs(expected).max()
+
+
+def test_every_moving_joint_offers_a_valid_sub_mechanism_tracing_its_path():
+    jansen = LinkageBatch.from_mechanisms([classic.jansen_leg()])
+    full = validate(jansen, keep_motion=True)
+    target = np.stack([np.cos(np.linspace(0, 6, 200)), np.sin(np.linspace(0, 6, 200))], 1)
+    subs = sub_mechanisms(jansen, target, keep=100)
+    moving = (~jansen.fixed[0] & jansen.valid[0]).sum() - 1  # all but the crank tip
+    assert len(subs) == moving
+    result = validate(subs, keep_motion=True)
+    assert result.valid.all()
+    paths = result.end_effector_paths(subs)
+    joints = {int(k) for k in subs.valid.sum(1)}
+    assert min(joints) == 4 and max(joints) == jansen.valid[0].sum()  # four-bars up to the leg
+    # Each sub-mechanism's end effector follows one joint of the leg exactly.
+    leg = full.motion.paths[0]  # (N, T, 2)
+    gaps = np.abs(paths[:, None] - leg[None]).max((2, 3)).min(1)
+    assert gaps.max() < 1e-9
+    # Asking for fewer keeps the ones whose shape is closest to the target's.
+    assert len(sub_mechanisms(jansen, target, keep=3)) == 3
 
 
 def test_augmented_copies_are_turned_and_mirrored():

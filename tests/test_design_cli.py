@@ -1,6 +1,5 @@
 """`linkd design` on the command line: exit codes, messages, the output folder's name."""
 
-import importlib.resources
 import json
 from pathlib import Path
 
@@ -9,7 +8,6 @@ import pytest
 from linkd.cli import main
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "assets" / "examples"
-SHIPPED = importlib.resources.files("linkd.assets") / "linkd.pt"
 
 BAD_CURVES = {
     "nan.csv": "x,y\n0,0\n1,0\nnan,1\n" + "".join(f"{k},{k * k}\n" for k in range(2, 10)),
@@ -43,7 +41,6 @@ def test_missing_curve_and_bad_options_exit_2(tmp_path, monkeypatch, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(not SHIPPED.is_file(), reason="the LinkD checkpoint is not shipped yet")
 def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     curve = str(EXAMPLES / "ellipse.csv")

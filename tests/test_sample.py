@@ -22,7 +22,10 @@ pytestmark = pytest.mark.usefixtures("one_thread")
 @pytest.fixture(scope="module")
 def model_and_curves():
     """A small model taught two mechanisms, each for its own curve: it samples them with
-    some noise, so some designs are valid and some are not."""
+    some noise, so some designs are valid and some are not. (One thread: the same model on
+    every machine.)"""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     torch.manual_seed(0)
     mechanisms = [classic.jansen_leg(), classic.watt_six_bar()]
     graphs = torch.tensor(np.stack([to_graph(m)[0] for m in mechanisms]), dtype=torch.float32)
@@ -34,6 +37,7 @@ def model_and_curves():
         opt.zero_grad()
         loss.backward()
         opt.step()
+    torch.set_num_threads(threads)
     return model.eval(), curves.numpy()
 
 

@@ -4,7 +4,9 @@ Stages, each timed and shown on a terminal:
 1. read     the curve file; resample it by arc length and normalise it (centroid 0, RMS radius
             1), remembering the similarity back to the user's frame;
 2. propose  LinkD designs for the target and its turned and mirrored copies;
-3. align    place every valid design on the target by its best similarity, rank by Chamfer;
+3. align    offer each valid design's sub-mechanisms too (any moving joint as end effector,
+            with the joints it hangs on), keep those whose shape is most like the target, place
+            each on the target by its best similarity, rank by Chamfer;
 4. refine   move the joints of the best few (one or two per topology) by batched L-BFGS
             through the differentiable kinematics;
 5. verify   from the best, map each design to the user's frame and units, validate, export and

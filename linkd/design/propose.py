@@ -72,7 +72,8 @@ def propose(
 
 
 def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> LinkageBatch:
-    """The `keep` sub-mechanisms of `batch` whose paths look most like the target.
+    """The `keep` sub-mechanisms of `batch` (in dyadic order, as decoded from graph matrices)
+    whose paths look most like the target.
 
     Every moving joint of a valid dyadic linkage traces a curve of its own, and the joints it
     hangs on (its ancestors, down to the crank and the ground) form a smaller valid linkage
@@ -87,6 +88,8 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
     moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread > MOVES)
     moving[:, :2] = False  # the crank tip only turns in a circle
     rows, joints = np.nonzero(moving)
+    if len(rows) == 0:
+        return batch  # nothing valid moves: `place` finds no candidate
     if len(rows) > keep:
         curves = resample_closed(paths[rows, joints].double(), 64)
         gap = _descriptor(curves) - _descriptor(torch.as_tensor(target)[None])
