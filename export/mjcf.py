@@ -9,11 +9,13 @@ only. Lengths are metres (CONTRACT §3).
 Simulation options. Loop closures are soft constraints in MuJoCo; the stiffest safe setting is a
 time constant of two time steps (`solref`) with impedance near 1 (`solimp` 0.9999). With RK4 at
 0.5 ms, a 2 s motor revolution of the Jansen leg keeps its loops closed to 8e-8 of its shortest
-link (the contract asks 1e-6; at 1 ms it is 3e-7, at 2 ms 1.3e-6); implicitfast needs 50 us for
-the same and runs five times slower. The crank servo is critically damped at 10 Hz for the
-largest inertia the crank drives, and the crank hinge carries a rotor inertia of that size:
-without it a light crank's own mode under the servo is too fast for RK4 (see `servo_gains`).
-The Newton solver with a tight tolerance converges in a few iterations.
+link (the contract asks 1e-6; at 1 ms it is 3e-7, at 2 ms 1.3e-6), but random mechanisms close
+to a toggle pose reached 1.2e-6 (2 of 62 in `linkd bench export`), so the step is 0.25 ms, which
+brings those to 3e-7; implicitfast needs 50 us and runs five times slower. The crank servo is
+critically damped at 10 Hz for the largest inertia the crank drives, and the crank hinge
+carries a rotor inertia of that size: without it a light crank's own mode under the servo is
+too fast for RK4 (see `servo_gains`). The Newton solver with a tight tolerance converges in a
+few iterations.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from .layers import Layout, Plate, convex_hull, plates
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
-TIMESTEP = 5e-4  # s
+TIMESTEP = 2.5e-4  # s
 SOLREF = (2 * TIMESTEP, 1.0)  # loop-closure time constant (two steps) and damping ratio
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
