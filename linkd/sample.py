@@ -59,12 +59,13 @@ def check_graphs(graphs: np.ndarray) -> tuple[np.ndarray, Validation, LinkageBat
     batch = LinkageBatch.from_graphs(graphs)
     result = validate(batch, keep_motion=True)
     paths = result.end_effector_paths(batch)
-    return result.valid & (_spread(paths) > MOVES), result, batch
+    return result.valid & (spread(paths) > MOVES), result, batch
 
 
-def _spread(paths):
-    """(B,) RMS distance of each path (B, T, 2) from its mean: 0 for a joint that never moves."""
-    return ((paths - paths.mean(1, keepdims=True)) ** 2).sum(-1).mean(-1) ** 0.5
+def spread(paths):
+    """(...) RMS distance of each path (..., T, 2) from its mean, numpy or torch: 0 for a joint
+    that never moves."""
+    return ((paths - paths.mean(-2, keepdims=True)) ** 2).sum(-1).mean(-1) ** 0.5
 
 
 def _check_node(rows: torch.Tensor, t: int, paths: torch.Tensor, fixed: torch.Tensor):
@@ -78,10 +79,10 @@ def _check_node(rows: torch.Tensor, t: int, paths: torch.Tensor, fixed: torch.Te
     links = rows[:, ADJ][:, :t] > 0.5
     ok, path, margin = check_new_node(paths, fixed, node_fixed, rows[:, XY], links)
     if t == MAX_NODES - 1:
-        ok = ok & (_spread(path) > MOVES)
+        ok = ok & (spread(path) > MOVES)
     right_links = torch.where(node_fixed, (links & ~fixed).sum(1) == 0, links.sum(1) == min(t, 2))
     score = 4.0 * ok + 2.0 * right_links + margin.clamp(-1, 1)
-    stop_ok = _spread(paths[:, -1]) > MOVES if t >= 3 else torch.zeros_like(ok)
+    stop_ok = spread(paths[:, -1]) > MOVES if t >= 3 else torch.zeros_like(ok)
     growing = rows[:, VALID] > 0.5
     ok = torch.where(growing, ok, stop_ok)
     score = torch.where(growing, score, torch.where(stop_ok, 4.0, -3.0))

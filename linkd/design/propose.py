@@ -19,11 +19,11 @@ from linkd.align import align
 from linkd.batch import LinkageBatch
 from linkd.design.refine import resample_closed
 from linkd.geometry import rotation
+from linkd.sample import MOVES, spread
 from linkd.validator import validate
 
 # (conditioning curves (C, 200, 2), samples per curve, seed) -> graph matrices (C * S, 20, 24)
 Proposer = Callable[[np.ndarray, int, int], np.ndarray]
-MOVES = 1e-6  # an end effector whose path spreads less than this (graph units) stands still
 HARMONICS = 16  # Fourier harmonics of the shape descriptor that pre-ranks sub-mechanisms
 
 
@@ -84,8 +84,7 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
     """
     result = validate(batch, keep_motion=True)
     paths = torch.as_tensor(result.motion.paths)  # (B, N, T, 2)
-    spread = (paths - paths.mean(2, keepdim=True)).square().sum(-1).mean(-1).sqrt().numpy()
-    moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread > MOVES)
+    moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread(paths).numpy() > MOVES)
     moving[:, :2] = False  # the crank tip only turns in a circle
     rows, joints = np.nonzero(moving)
     if len(rows) == 0:
@@ -130,8 +129,7 @@ def place(batch: LinkageBatch, target: np.ndarray) -> Candidates:
     """Keep the valid linkages of `batch` and move each onto the target by its best similarity."""
     result = validate(batch, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
-    spread = np.sqrt(((paths - paths.mean(1, keepdims=True)) ** 2).sum(-1).mean(1))
-    keep = np.flatnonzero(result.valid & (spread > MOVES))
+    keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
     batch, paths = batch.subset(keep), paths[keep]
     if len(keep) == 0:
         return Candidates(batch, np.zeros(0))
