@@ -4,6 +4,11 @@ For every target curve one design is sampled per strategy and seed. A design suc
 is a valid linkage (topology and motion) whose end effector moves; its curve error is the
 Chamfer distance between its end-effector path at 200 crank angles and the target, both
 centred on their points' centroid and scaled to unit RMS radius, with no rotation search.
+
+Two yardsticks say what the model takes from the curve: the same protocol applied to linkd's
+random generator (`random`: curated mechanisms drawn blind to the curve, one per curve and
+seed), and the conditioning gap (the teacher-forced loss with each graph's own curve against
+the loss with another graph's curve: zero for a model that ignores its condition).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from linkd.model import LinkD
 from linkd.sample import STRATEGIES, check_graphs, sample
 
 N_POINTS = 200
+BASELINE = "random"  # the generator's curve-blind samples, scored like a strategy
 
 
 @dataclass
@@ -30,6 +36,7 @@ class Targets:
     name: str
     conditioning: np.ndarray  # (C, 200, 2) what the model is given: arc-length resampled
     targets: np.ndarray  # (C, T, 2) what designs are compared with: as stored or read
+    graphs: torch.Tensor | None = None  # (C, 20, 24) the true mechanisms, in a data set
 
 
 def point_normalised(curves: np.ndarray) -> np.ndarray:
@@ -55,10 +62,12 @@ def node_counts(graphs: np.ndarray) -> np.ndarray:
 
 def dataset_targets(root: str | Path, split: str = "test", count: int | None = None) -> Targets:
     """The first `count` curves of a data split, conditioned the way training conditions."""
-    from linkd.train import TrainData, conditioning
+    from linkd.training_data import TrainData, conditioning
 
-    curves = TrainData.load(root, split).curves[:count]
-    return Targets(f"{Path(root).name}-{split}", conditioning(curves).numpy(), curves.numpy())
+    data = TrainData.load(root, split)
+    curves = data.curves[:count]
+    return Targets(f"{Path(root).name}-{split}", conditioning(curves).numpy(), curves.numpy(),
+                   data.graphs[:count])  # fmt: skip
 
 
 def folder_targets(folder: str | Path, count: int | None = None) -> Targets:
@@ -84,27 +93,61 @@ def evaluate(
     steps: int | None = None,
     progress: bool = False,
 ) -> dict:
-    """Success rate and mean Chamfer distance per strategy and seed, with mean and std."""
+    """Success rate and mean Chamfer distance per strategy and seed, with mean and std.
+
+    `strategies` may include BASELINE: the generator's curve-blind samples, scored the same way.
+    """
     results: dict = {"curves": len(targets.targets), "source": targets.name, "strategies": {}}
     for strategy in strategies:
         runs = []
         for seed in seeds:
             start = time.perf_counter()
-            samples = sample(model, targets.conditioning, 1, strategy, retries, seed, steps,
-                             progress)  # fmt: skip
+            if strategy == BASELINE:
+                graphs = random_graphs(len(targets.targets), seed)
+            else:
+                graphs = sample(model, targets.conditioning, 1, strategy, retries, seed, steps,
+                                progress).graphs  # fmt: skip
             seconds = time.perf_counter() - start
-            distance = design_chamfer(samples.graphs, targets.targets)
+            distance = design_chamfer(graphs, targets.targets)
+            valid = np.isfinite(distance)
             runs.append({
                 "seed": seed,
-                "success": float(samples.valid.mean()),
-                "chamfer": float(np.nanmean(distance)) if samples.valid.any() else None,
-                "n_valid": int(samples.valid.sum()),
+                "success": float(valid.mean()),
+                "chamfer": float(np.nanmean(distance)) if valid.any() else None,
+                "n_valid": int(valid.sum()),
                 "seconds": round(seconds, 2),
-                "node_counts": node_counts(samples.graphs).tolist(),
-                "valid": samples.valid.tolist(),
+                "node_counts": node_counts(graphs).tolist(),
+                "valid": valid.tolist(),
             })  # fmt: skip
         results["strategies"][strategy] = {"runs": runs, **_summary(runs)}
     return results
+
+
+def random_graphs(count: int, seed: int) -> np.ndarray:
+    """`count` graph matrices from linkd's random generator (valid, curated, curve-blind)."""
+    from linkd.generator import generate
+
+    return generate(count, np.random.default_rng([seed, 0x6C6B64])).graphs
+
+
+@torch.no_grad()
+def conditioning_gap(model: LinkD, graphs: torch.Tensor, curves: torch.Tensor, seed: int = 0,
+                     draws: int = 4) -> dict:  # fmt: skip
+    """Teacher-forced loss of graphs (B, 20, 24) with their own conditioning curves (B, 200, 2)
+    and with the curves rolled by one (another graph's), under the same diffusion noise.
+
+    The gap (shuffled minus own) is what the model takes from the curve.
+    """
+    was_training = model.training
+    model.eval()
+    losses = {}
+    for name, given in (("own", curves), ("shuffled", curves.roll(1, 0))):
+        torch.manual_seed(seed)
+        total, parts = model(graphs, given, draws)
+        losses[name] = {"loss": float(total), **{k: float(v) for k, v in parts.items()}}
+    model.train(was_training)
+    gap = {k: losses["shuffled"][k] - losses["own"][k] for k in losses["own"]}
+    return {"own": losses["own"], "shuffled": losses["shuffled"], "gap": gap}
 
 
 def _summary(runs: list[dict]) -> dict:
@@ -131,7 +174,8 @@ def sampling_speed(model: LinkD, curve: np.ndarray, count: int = 256, seed: int 
 
 
 def table(results: dict) -> str:
-    """Plain-text table: success rate and mean Chamfer (mean +- std over seeds) per strategy."""
+    """Plain-text table: success rate and mean Chamfer (mean +- std over seeds) per strategy,
+    and the conditioning gap when it was measured."""
     seeds = len(next(iter(results["strategies"].values()))["runs"])
     lines = [
         f"{results['source']}: {results['curves']} curves, {seeds} seeds",
@@ -143,6 +187,13 @@ def table(results: dict) -> str:
             f"{s['chamfer_mean']:.4f} ± {s['chamfer_std']:.4f}")  # fmt: skip
         success = f"{100 * s['success_mean']:.2f} ± {100 * s['success_std']:.2f}"
         lines.append(f"{name:<10} {success:>16} {chamfer:>18} {n:>9.0f}")
+    gap = results.get("conditioning")
+    if gap:
+        lines.append(
+            f"conditioning: teacher-forced loss {gap['own']['loss']:.4f} with the own curve, "
+            f"{gap['shuffled']['loss']:.4f} with another (gap {gap['gap']['loss']:.4f}; "
+            f"position {gap['gap']['position']:.4f}, links {gap['gap']['links']:.4f})"
+        )
     return "\n".join(lines)
 
 

@@ -98,18 +98,19 @@ def _rounds(retries: int) -> list[int]:
     return widths
 
 
-def _propose(model, context, t, paths, fixed, retries, steps, generator):
+def _propose(model, context, t, paths, fixed, retries, steps, generator, null, w):
     """Rows for node t of every growing sample; failing ones are resampled, up to `retries`
     proposals each, drawn in rounds, keeping the best-scoring proposal."""
     index = torch.full((len(context),), t, dtype=torch.long, device=context.device)
-    rows = model.denoise(context, index, steps, generator)
+    rows = model.denoise(context, index, steps, generator, null, w)
     ok, path, score = _check_node(rows, t, paths, fixed)
     for width in _rounds(retries):
         bad = torch.nonzero(~ok)[:, 0]
         if len(bad) == 0:
             break
         many = bad.repeat_interleave(width)
-        again = model.denoise(context[many], index[many], steps, generator)
+        again = model.denoise(context[many], index[many], steps, generator,
+                              None if null is None else null[many], w)  # fmt: skip
         ok2, path2, score2 = _check_node(again, t, paths[many], fixed[many])
         best = score2.view(len(bad), width).argmax(1)
         best += torch.arange(len(bad), device=best.device) * width
@@ -131,37 +132,49 @@ def grow(
     generator: torch.Generator,
     steps: int | None = None,
     retries: int | None = None,
+    guidance: float | None = None,
 ) -> torch.Tensor:
     """Grow (B, 20, 24) graphs from curve encodings (B, 1 + P, dim), node by node.
 
     retries=None: no checks (one pass); otherwise node-level retry with that many retries.
+    guidance: classifier-free guidance scale (default: the model's); above 1 the backbone also
+    reads every partial graph without the curve, as a second half of the batch.
     """
     device = cond.device
-    graphs = empty_graphs(len(cond), device)
+    w = model.config.guidance if guidance is None else guidance
+    guided = w != 1.0
+    b = len(cond)
+    graphs = empty_graphs(b, device)
     check = retries is not None
-    paths = torch.zeros(len(cond), MAX_NODES, N_ANGLES, 2, device=device) if check else None
-    live = torch.arange(len(cond), device=device)
+    paths = torch.zeros(b, MAX_NODES, N_ANGLES, 2, device=device) if check else None
+    live = torch.arange(b, device=device)
     cache = model.new_cache()
-    context = model.backbone(graphs[:, :0], cond, cache)[:, -1]
+    both = torch.cat([cond, model.null_encoding(cond)]) if guided else cond
+    out = model.backbone(graphs[:, :0].repeat(2 if guided else 1, 1, 1), both, cache)[:, -1]
     for t in range(MAX_NODES):
+        context, null = (out[: len(live)], out[len(live) :]) if guided else (out, None)
         if check:
             fixed = graphs[live, :t, TYPE] > 0.5
             rows, path = _propose(model, context, t, paths[live, :t], fixed, retries, steps,
-                                  generator)  # fmt: skip
+                                  generator, null, w)  # fmt: skip
             paths[live, t] = path
         else:
             index = torch.full((len(live),), t, dtype=torch.long, device=device)
-            rows = model.denoise(context, index, steps, generator)
+            rows = model.denoise(context, index, steps, generator, null, w)
         graphs[live, t] = rows
         keep = rows[:, VALID] > 0.5
         live = live[keep]
         if t + 1 == MAX_NODES or len(live) == 0:
             break
+        keep_both = torch.cat([keep, keep]) if guided else keep
         for layer in cache:
             for key, value in layer.items():
-                layer[key] = tuple(v[keep] for v in value) if key == "mod" else value[keep]
-        cond = cond[keep]
-        context = model.backbone(rows[keep][:, None], cond, cache)[:, -1]
+                layer[key] = (
+                    tuple(v[keep_both] for v in value) if key == "mod" else value[keep_both]
+                )
+        both = both[keep_both]
+        new = rows[keep][:, None]
+        out = model.backbone(torch.cat([new, new]) if guided else new, both, cache)[:, -1]
     return graphs
 
 
@@ -174,6 +187,7 @@ def sample(
     seed: int = 0,
     steps: int | None = None,
     progress: bool = False,
+    guidance: float | None = None,
 ) -> Samples:
     """`per_curve` linkages for each normalised curve (C, 200, 2), grown in batches.
 
@@ -200,14 +214,15 @@ def sample(
         for start in chunks:
             part = cond[start : start + CHUNK]
             node_retries = retries if strategy == "node" else None
-            g = grow(model, part, generator, steps, node_retries).cpu().numpy()
+            g = grow(model, part, generator, steps, node_retries, guidance).cpu().numpy()
             ok = check_graphs(g)[0]
             advance()
             for width in _rounds(retries) if strategy == "graph" else []:
                 bad = np.flatnonzero(~ok)
                 if len(bad) == 0:
                     break
-                grown = grow(model, part[np.repeat(bad, width)], generator, steps).cpu().numpy()
+                again = part[np.repeat(bad, width)]
+                grown = grow(model, again, generator, steps, None, guidance).cpu().numpy()
                 good = check_graphs(grown)[0].reshape(len(bad), width)
                 # the first valid regrowth of each graph, or its last one if none is valid
                 choice = np.where(good.any(1), good.argmax(1), width - 1)

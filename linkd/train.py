@@ -26,13 +26,8 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from linkd.curves import curve_moments
-from linkd.graph import VALID, XY
 from linkd.model import LinkD, LinkDConfig, save_checkpoint
-
-N_POINTS = 200
-PATH_RADIUS = 0.25  # RMS radius of the end-effector path in the training frame (at most)
-FILL = 0.95  # no joint farther than this from the origin in the training frame
+from linkd.training_data import TrainData, augment, conditioning
 
 
 @dataclass
@@ -59,14 +54,21 @@ class TrainConfig:
     device: str = "cpu"
     bf16: bool = False  # autocast matmuls to bfloat16 (CUDA)
     threads: int = 0  # torch CPU threads per process; 0 keeps torch's default
+    init: str | None = None  # start from this checkpoint's weights (see `warm_start`)
 
 
 PRESETS = {
     "cpu": TrainConfig(),
+    # Continues a `cpu` run (--init): adds cross-attention to the curve's patches and curve
+    # dropout for classifier-free guidance.
+    "cpu-guided": TrainConfig(
+        model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
+        max_steps=6000, lr=5e-4, warmup=200, eval_every=2000,
+    ),
     "cuda": TrainConfig(
         model=LinkDConfig(
             dim=384, layers=8, heads=8, encoder_layers=4, head_widths=(512, 256, 128),
-            head_cond=256,
+            head_cond=256, cross_attention=True, curve_dropout=0.1, guidance=1.5,
         ),
         batch_size=512, max_steps=150_000, lr=4e-4, min_lr=2e-5, warmup=2000, ema=0.9999,
         draws=4, eval_every=10_000, eval_curves=500, checkpoint_every=2000, device="cuda",
@@ -79,92 +81,6 @@ PRESETS = {
         checkpoint_every=10,
     ),
 }  # fmt: skip
-
-
-@dataclass
-class TrainData:
-    graphs: torch.Tensor  # (K, 20, 24) float32
-    curves: torch.Tensor  # (K, T, 2) float32, crank-angle samples, normalised
-    n_nodes: torch.Tensor  # (K,) int64
-
-    def __len__(self) -> int:
-        return len(self.graphs)
-
-    @classmethod
-    def load(cls, root: str | Path, split: str) -> TrainData:
-        """One split of a data set, its mechanisms moved into their curve's frame."""
-        from linkd.dataset import load_split
-
-        part = {k: torch.as_tensor(v) for k, v in load_split(root, split).items()}
-        graphs = curve_frame(part["graphs"].float(), part["centre"].float(), part["scale"].float())
-        return cls(graphs, part["curves"].float(), part["n_nodes"].long())
-
-
-def curve_frame(graphs: torch.Tensor, centre: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-    """Mechanisms re-expressed around their end-effector path: its centroid at the origin, its
-    RMS radius PATH_RADIUS, or less where a joint would otherwise lie farther out than FILL.
-
-    The target curve is normalised the same way (centroid 0, fixed size), so the model knows
-    where the curve lies among the joints it places, instead of guessing the frame.
-    """
-    valid = graphs[..., VALID] > 0.5
-    rel = (graphs[..., XY] - centre[:, None]) / scale[:, None, None]  # in path radii
-    reach = (rel.norm(dim=-1) * valid).amax(1)
-    k = torch.clamp(FILL / reach, max=PATH_RADIUS)
-    out = graphs.clone()
-    out[..., XY] = torch.where(valid[..., None], rel * k[:, None, None], 0.0)
-    return out
-
-
-# ---------------------------------------------------------------------------------------------
-# Conditioning curves and augmentation
-
-
-def resample_closed(curves: torch.Tensor, n: int, offset: torch.Tensor) -> torch.Tensor:
-    """(B, M, 2) closed polylines -> (B, n, 2) points equally spaced by arc length, starting a
-    fraction `offset` (B,) of the length after the first point."""
-    following = curves.roll(-1, 1)
-    seg = (following - curves).norm(dim=-1)
-    start = seg.cumsum(1) - seg
-    total = seg.sum(1, keepdim=True)
-    s = (offset[:, None] + torch.arange(n, device=curves.device) / n) % 1 * total
-    k = (torch.searchsorted(start, s, right=True) - 1).clamp(0, curves.shape[1] - 1)
-    frac = ((s - start.gather(1, k)) / seg.gather(1, k).clamp_min(1e-12)).clamp(0, 1)[..., None]
-    pick = k[..., None].expand(-1, -1, 2)
-    return curves.gather(1, pick) + frac * (following.gather(1, pick) - curves.gather(1, pick))
-
-
-def conditioning(curves: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
-    """What the model sees: arc-length resampled, normalised curves; with a generator, from a
-    random start and in a random direction."""
-    b = len(curves)
-    if generator is None:
-        offset = torch.zeros(b)
-    else:
-        reverse = torch.rand(b, generator=generator) < 0.5
-        curves = torch.where(reverse[:, None, None], curves.flip(1), curves)
-        offset = torch.rand(b, generator=generator)
-    points = resample_closed(curves, N_POINTS, offset.to(curves.device))
-    centroid, radius = curve_moments(points)
-    return (points - centroid[:, None]) / radius[:, None, None]
-
-
-def augment(graphs, curves, generator, reflect: float, rotate: float):
-    """Mirror and rotate mechanisms and curves together; positions are shrunk back into
-    [-1, 1] if a rotation pushed them out."""
-    b = len(graphs)
-    angle = torch.rand(b, generator=generator) * 2 * math.pi
-    angle = torch.where(torch.rand(b, generator=generator) < rotate, angle, 0.0)
-    mirror = torch.where(torch.rand(b, generator=generator) < reflect, -1.0, 1.0)
-    cos, sin = angle.cos(), angle.sin()
-    rows = [torch.stack([cos * mirror, -sin], -1), torch.stack([sin * mirror, cos], -1)]
-    m = torch.stack(rows, -2).to(graphs.device)
-    xy = graphs[..., XY] @ m.transpose(1, 2)
-    valid = graphs[..., VALID : VALID + 1] > 0.5
-    shrink = (xy.abs() * valid).amax((1, 2)).clamp_min(1.0)
-    graphs = graphs.clone()
-    graphs[..., XY] = torch.where(valid, xy / shrink[:, None, None], 0.0)
-    return graphs, curves @ m.transpose(1, 2)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -239,6 +155,8 @@ def train(
 
     torch.manual_seed(c.seed)
     model = LinkD(c.model).to(device)
+    if c.init:
+        warm_start(model, c.init)
     ema = copy.deepcopy(model).requires_grad_(False)
     decay = [p for p in model.parameters() if p.ndim >= 2]
     no_decay = [p for p in model.parameters() if p.ndim < 2]
@@ -306,6 +224,24 @@ def train(
 
 
 @torch.no_grad()
+def warm_start(model: LinkD, path: str | Path) -> None:
+    """Copy a checkpoint's weights into `model`, which may have grown since: parameters it
+    lacks keep their initialisation, and a layer that got wider (the adaLN projection, when
+    cross-attention is added) takes the old rows first. New adaLN rows start at zero, so the
+    warm-started model computes exactly what the checkpoint did until training moves it."""
+    old = torch.load(Path(path), map_location="cpu", weights_only=True)["model"]
+    state = model.state_dict()
+    for name, value in old.items():
+        if name not in state:
+            raise ValueError(f"{path}: {name} has no place in this model")
+        target = state[name]
+        if target.shape[1:] != value.shape[1:] or target.shape[0] < value.shape[0]:
+            raise ValueError(f"{path}: {name} is {tuple(value.shape)}, here {tuple(target.shape)}")
+        target[: value.shape[0]] = value
+    model.load_state_dict(state)
+
+
+@torch.no_grad()
 def update_ema(ema: LinkD, model: LinkD, decay: float, step: int) -> None:
     decay = min(decay, (1 + step) / (10 + step))
     for e, p in zip(ema.parameters(), model.parameters()):
@@ -320,21 +256,24 @@ def atomic_save(state: dict, path: Path) -> None:
 
 @torch.no_grad()
 def validation_metrics(model: LinkD, val: TrainData, c: TrainConfig) -> dict:
-    """Teacher-forced loss on validation graphs, and node-level sampling of validation curves:
+    """Teacher-forced loss on validation graphs with their own and with shuffled curves (the
+    gap is what the model takes from the curve), and node-level sampling of validation curves:
     the fraction of valid designs and their mean Chamfer distance to the target."""
-    from linkd.evaluate import design_chamfer
+    from linkd.evaluate import conditioning_gap, design_chamfer
     from linkd.sample import sample
 
     model.eval()
     device = next(model.parameters()).device
-    torch.manual_seed(c.seed)
     part = slice(0, min(len(val), 1024))
-    loss = model(val.graphs[part].to(device), conditioning(val.curves[part]).to(device), c.draws)[0]
+    curves = conditioning(val.curves[part]).to(device)
+    gap = conditioning_gap(model, val.graphs[part].to(device), curves, c.seed, c.draws)
     targets = val.curves[: c.eval_curves]
     samples = sample(model, conditioning(targets).numpy(), 1, "node", seed=c.seed)
     chamfer = design_chamfer(samples.graphs, targets.numpy())
     return {
-        "val_loss": float(loss),
+        "val_loss": gap["own"]["loss"],
+        "shuffled_loss": gap["shuffled"]["loss"],
+        "conditioning_gap": gap["gap"]["loss"],
         "valid": float(samples.valid.mean()),
         "chamfer": float(np.nanmean(chamfer)) if np.isfinite(chamfer).any() else None,
     }

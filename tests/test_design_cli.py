@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from linkd.cli import main
@@ -35,7 +36,8 @@ def test_missing_curve_and_bad_options_exit_2(tmp_path, monkeypatch, capsys):
     assert "absent.csv" in capsys.readouterr().err
     curve = str(EXAMPLES / "ellipse.csv")
     for args in (["--candidates", "0"], ["--export", "step"], ["--time-budget", "0"],
-                 ["--units", "furlong"], ["--strategy", "best"], ["--top", "-1"]):  # fmt: skip
+                 ["--units", "furlong"], ["--strategy", "best"], ["--top", "-1"],
+                 ["--proposer", "oracle"]):  # fmt: skip
         assert main(["design", curve, *args]) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
     assert list(tmp_path.iterdir()) == []
@@ -56,3 +58,20 @@ def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, caps
     assert main([*args, "--export", "stl"]) == 0
     assert (tmp_path / "ellipse-design-2" / "mechanism.json").is_file()
     assert not (tmp_path / "ellipse-design-2" / "mechanism.xml").exists()
+
+
+def test_random_proposer_designs_blind_to_the_curve(tmp_path, monkeypatch):
+    from linkd.design.propose import random_proposer
+
+    monkeypatch.chdir(tmp_path)
+    curve = str(EXAMPLES / "ellipse.csv")
+    args = ["design", curve, "--export", "mjcf", "--candidates", "32", "--proposer", "random"]
+    assert main([*args, "--out", "a"]) == 0
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert report["search"]["proposer"] == "random" and "model" not in report["search"]
+    assert report["verification"]["passed"]
+    propose = random_proposer()
+    curves = np.zeros((2, 200, 2), np.float32)
+    first, again = propose(curves, 3, 0), propose(curves + 1, 3, 0)
+    assert first.shape == (6, 20, 24) and np.array_equal(first, again)  # blind and repeatable
+    assert not np.array_equal(first, propose(curves, 3, 1))

@@ -9,7 +9,9 @@ import torch
 from linkd.cli import main
 from linkd.curves import write_curve
 from linkd.evaluate import (
+    BASELINE,
     Targets,
+    conditioning_gap,
     design_chamfer,
     evaluate,
     folder_targets,
@@ -90,3 +92,29 @@ def test_eval_command(samples, tmp_path, capsys):
     assert (tmp_path / "out" / "curves" / "results.json").exists()
     assert main([*args[:-2], "--strategies", "beam"]) == 2
     assert main(["eval", str(tmp_path / "nowhere")]) == 2
+
+
+def test_the_curve_blind_baseline_is_scored_like_a_strategy(samples):
+    model = LinkD(TINY).eval()
+    targets = Targets("gen", samples.curves[:4], samples.curves[:4])
+    results = evaluate(model, targets, (BASELINE,), seeds=(0, 1))
+    runs = results["strategies"][BASELINE]["runs"]
+    assert all(r["success"] == 1.0 for r in runs)  # the generator's mechanisms are valid
+    assert runs[0]["node_counts"] != runs[1]["node_counts"]  # a new draw per seed
+    assert all(r["chamfer"] > 0.05 for r in runs)  # blind to the curve, so it misses it
+
+
+def test_conditioning_gap_is_zero_for_a_model_that_ignores_the_curve(samples):
+    torch.manual_seed(0)
+    graphs, curves = torch.as_tensor(samples.graphs), torch.as_tensor(samples.curves)
+    blind = LinkD(TINY)  # adaLN starts at zero and no cross-attention: the curve is unused
+    with torch.no_grad():
+        blind.backbone.final[1].weight.zero_()  # ... but for the final modulation
+    gap = conditioning_gap(blind, graphs, curves)
+    assert gap["gap"]["loss"] == pytest.approx(0.0, abs=1e-6)
+    assert gap["own"]["loss"] > 0 and set(gap["gap"]) == set(gap["own"])
+    seeing = LinkD(TINY)
+    with torch.no_grad():
+        for p in seeing.parameters():
+            p.add_(0.1 * torch.randn_like(p))
+    assert abs(conditioning_gap(seeing, graphs, curves)["gap"]["loss"]) > 1e-4

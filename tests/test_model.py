@@ -39,6 +39,20 @@ def test_loss_is_finite_and_reaches_every_parameter():
     assert all(p.grad is not None for p in model.parameters())
 
 
+def test_dropped_curves_train_the_null_curve_and_ignore_the_curve():
+    model = LinkD(replace(TINY, curve_dropout=1.0)).train()
+    graphs = graphs_of(classic.jansen_leg(), classic.crank_rocker())
+    losses = []
+    for curves in (torch.randn(2, 200, 2), torch.randn(2, 200, 2)):
+        model.zero_grad()
+        torch.manual_seed(0)
+        loss = model(graphs, curves)[0]
+        loss.backward()
+        losses.append(loss.item())
+    assert model.null_curve.grad.abs().sum() > 0
+    assert losses[0] == pytest.approx(losses[1], abs=1e-6)  # every curve was dropped
+
+
 CROSS = replace(TINY, cross_attention=True)
 
 
@@ -96,7 +110,7 @@ def test_checkpoint_round_trip(tmp_path):
 def test_learns_to_reproduce_one_mechanism(mechanism, config):
     """Teacher forcing on one graph and curve: sampling then rebuilds that graph."""
     torch.manual_seed(0)
-    model = LinkD(config)
+    model = LinkD(replace(config, sample_coins=False))  # the likelier side, every time
     graphs = graphs_of(mechanism()).expand(16, -1, -1)
     curves = torch.randn(1, 200, 2).expand(16, -1, -1)
     opt = torch.optim.AdamW(model.parameters(), 3e-3)
@@ -115,3 +129,26 @@ def test_learns_to_reproduce_one_mechanism(mechanism, config):
     discrete[2:4] = False
     assert torch.equal(out[..., discrete], truth[..., discrete])
     assert (out[..., 2:4] - truth[..., 2:4]).abs().max() < 0.1
+
+
+@pytest.mark.parametrize("logit", [0.0, 2.0])
+def test_validity_and_type_are_drawn_with_the_predicted_odds(logit):
+    """A head that predicts validity and ground with odds e^logit: coins follow those odds,
+    deterministic DDIM always takes the likelier side."""
+    model = LinkD(TINY).eval()
+    with torch.no_grad():
+        last = model.head.out[1]
+        last.weight.zero_()
+        last.bias.zero_()
+        last.bias[VALID] = logit
+        last.bias[1] = logit
+    context = torch.randn(4000, TINY.dim)
+    index = torch.full((4000,), 5)
+    rows = model.denoise(context, index, generator=torch.Generator().manual_seed(0))
+    p = 1 / (1 + np.exp(-logit))
+    assert abs(float((rows[:, VALID] > 0.5).float().mean()) - p) < 0.03
+    valid = rows[:, VALID] > 0.5
+    assert abs(float((rows[valid, 1] > 0.5).float().mean()) - p) < 0.03
+    model.config = replace(TINY, sample_coins=False)
+    rows = model.denoise(context, index, generator=torch.Generator().manual_seed(0))
+    assert bool((rows[:, VALID] > 0.5).all()) == (logit > 0)

@@ -127,7 +127,7 @@ def test_bad_arguments_are_input_errors(model_and_curves, tmp_path):
 
 def test_shipped_model_designs_valid_linkages_for_generated_curves():
     from linkd.generator import generate
-    from linkd.train import conditioning
+    from linkd.training_data import conditioning
 
     model = load_model()
     curves = conditioning(torch.as_tensor(generate(6, 11).curves)).numpy()

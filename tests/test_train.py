@@ -13,18 +13,15 @@ from linkd.batch import LinkageBatch
 from linkd.curves import chamfer_batch, curve_moments
 from linkd.generator import generate
 from linkd.model import LinkD, load_checkpoint
-from linkd.train import (
+from linkd.train import PRESETS, epoch_batches, lr_at, train
+from linkd.training_data import (
     FILL,
     PATH_RADIUS,
-    PRESETS,
     TrainData,
     augment,
     conditioning,
     curve_frame,
-    epoch_batches,
-    lr_at,
     resample_closed,
-    train,
 )
 from linkd.validator import validate
 

@@ -50,6 +50,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--time-budget", type=float, default=30.0, help="seconds per curve")
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
+    d.add_argument("--proposer", default="model", choices=("model", "random"),
+                   help="candidates from LinkD or from the curve-blind generator")  # fmt: skip
+    d.add_argument("--guidance", type=float, help="LinkD guidance scale (default: the model's)")
     d.add_argument("--json", help="also write the figures to this JSON file")
     d.set_defaults(run=design)
 

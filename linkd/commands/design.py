@@ -12,6 +12,7 @@ from linkd.errors import InputError
 from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
 
 STRATEGIES = ("node", "graph", "oneshot")
+PROPOSERS = ("model", "random")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,6 +31,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=0, help="also write alternative topologies")
     p.add_argument("--time-budget", type=float, default=30.0, help="seconds for the whole run")
     p.add_argument("--model", help="LinkD checkpoint (default: the one shipped with linkd)")
+    p.add_argument("--proposer", default="model",
+                   help="where candidates come from: model (LinkD, default) or random (linkd's "
+                        "generator, blind to the curve: the baseline)")  # fmt: skip
     p.set_defaults(run=run)
 
 
@@ -46,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
     if args.strategy not in STRATEGIES:
         raise InputError(
             f"--strategy: expected one of {', '.join(STRATEGIES)}, got {args.strategy!r}"
+        )
+    if args.proposer not in PROPOSERS:
+        raise InputError(
+            f"--proposer: expected one of {', '.join(PROPOSERS)}, got {args.proposer!r}"
         )
     for name in ("candidates", "top"):
         value = getattr(args, name)
@@ -72,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         every_joint=not single,
         attempts=1 if single else DesignOptions.attempts,
         model=args.model,
+        proposer=args.proposer,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:

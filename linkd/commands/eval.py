@@ -18,9 +18,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=int, default=3, help="independent runs, seeds 0..N-1")
     p.add_argument(
         "--strategies",
-        default="oneshot,graph,node",
-        help="comma-separated subset of oneshot,graph,node",
+        default="oneshot,graph,node,random",
+        help="comma-separated subset of oneshot,graph,node and random (the generator's "
+        "curve-blind samples, the no-model baseline)",
     )
+    p.add_argument("--guidance", type=float, help="guidance scale (default: the model's)")
+    p.add_argument("--coins", action=argparse.BooleanOptionalAction, default=None,
+                   help="draw validity and type as coins (default: the model's; --no-coins: "
+                        "deterministic DDIM, the likelier side)")  # fmt: skip
     p.add_argument("--retries", type=int, default=25)
     p.add_argument("--steps", type=int, help="DDIM steps (default: the model's)")
     p.add_argument(
@@ -45,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     from linkd.sample import STRATEGIES, load_model
 
     strategies = tuple(s.strip() for s in args.strategies.split(",") if s.strip())
-    unknown = [s for s in strategies if s not in STRATEGIES]
+    unknown = [s for s in strategies if s not in (*STRATEGIES, ev.BASELINE)]
     if unknown or not strategies:
         raise InputError(f"--strategies: unknown {', '.join(unknown) or '(none given)'}")
     if args.seeds < 1 or (args.count is not None and args.count < 1):
@@ -62,11 +67,20 @@ def run(args: argparse.Namespace) -> int:
         else:
             targets.append(ev.dataset_targets(folder, args.split, args.count))
     model = load_model(args.checkpoint)
+    if args.guidance is not None:
+        model.config.guidance = args.guidance
+    if args.coins is not None:
+        model.config.sample_coins = args.coins
     progress = sys.stdout.isatty()
     for target in targets:
         results = ev.evaluate(model, target, strategies, tuple(range(args.seeds)), args.retries,
                            args.steps, progress)  # fmt: skip
         results["checkpoint"] = args.checkpoint or "shipped"
+        results["guidance"] = model.config.guidance
+        results["coins"] = model.config.sample_coins
+        if target.graphs is not None:
+            curves = torch.as_tensor(target.conditioning)
+            results["conditioning"] = ev.conditioning_gap(model, target.graphs, curves)
         if args.speed > 0:
             results["speed"] = ev.sampling_speed(model, target.conditioning[0], args.speed)
         ev.write_report(results, Path(args.out) / target.name)

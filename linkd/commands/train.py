@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS = ("cpu", "cuda", "tiny")
+PRESETS = ("cpu", "cpu-guided", "cuda", "tiny")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="nodes also attend to the curve's patch tokens (default: the preset's)",
     )
+    p.add_argument("--init", help="start from this checkpoint's weights (e.g. a cpu run's)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", help="cpu or cuda (default: the preset's)")
     p.add_argument(
@@ -48,11 +49,13 @@ def run(args: argparse.Namespace) -> int:
     from linkd.train import PRESETS as CONFIGS
     from linkd.train import train
 
+    if args.init and not Path(args.init).is_file():
+        raise InputError(f"--init: {args.init}: no such checkpoint")
     if not Path(args.data).is_dir():
         raise InputError(f"{args.data}: no such data folder (make one with `linkd dataset`)")
     overrides = {
         "max_steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
-        "eval_every": args.eval_every, "device": args.device,
+        "eval_every": args.eval_every, "device": args.device, "init": args.init,
     }  # fmt: skip
     preset = CONFIGS[args.preset]
     if args.cross_attention is not None:

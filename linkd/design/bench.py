@@ -134,7 +134,7 @@ def write_json(path: str | Path, results: dict, options: DesignOptions) -> None:
 
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
-                "refine": options.refine}  # fmt: skip
+                "refine": options.refine, "proposer": options.proposer}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 
@@ -142,11 +142,15 @@ def main(args) -> int:
     """`linkd bench design`: parsed arguments in, figures printed (and written as JSON)."""
     from linkd.sample import load_model
 
-    from .propose import model_proposer
+    from .propose import model_proposer, random_proposer
 
     options = DesignOptions(candidates=args.candidates, strategy=args.strategy, seed=args.seed,
-                            time_budget=args.time_budget, refine=args.refine)  # fmt: skip
-    proposer = model_proposer(load_model(args.model), args.strategy)
+                            time_budget=args.time_budget, refine=args.refine,
+                            proposer=args.proposer)  # fmt: skip
+    if args.proposer == "random":
+        proposer = random_proposer()
+    else:
+        proposer = model_proposer(load_model(args.model), args.strategy, guidance=args.guidance)
     with tempfile.TemporaryDirectory(prefix="linkd-curves-") as folder:
         files = curve_files(args.curves) if args.curves else []
         if args.dataset:

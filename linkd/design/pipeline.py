@@ -32,7 +32,15 @@ from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
 
 from .output import Delivered, deliver, finish, summary
-from .propose import Candidates, Proposer, model_proposer, place, propose, sub_mechanisms
+from .propose import (
+    Candidates,
+    Proposer,
+    model_proposer,
+    place,
+    propose,
+    random_proposer,
+    sub_mechanisms,
+)
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
@@ -58,6 +66,7 @@ class DesignOptions:
     per_topology: int = 2  # of which at most this many share a topology
     attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
+    proposer: str = "model"  # "model": LinkD; "random": the generator, blind to the curve
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
 
 
@@ -134,7 +143,10 @@ def _search(
 ) -> Candidates:
     """Propose, place and refine; each candidate's `chamfer` is its latest curve error."""
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
-        if proposer is None:
+        search["proposer"] = o.proposer
+        if proposer is None and o.proposer == "random":
+            proposer = random_proposer()
+        elif proposer is None:
             from linkd.sample import load_model
 
             proposer = model_proposer(load_model(o.model), o.strategy)

@@ -50,12 +50,26 @@ def augmented(target: np.ndarray, rotations: int) -> np.ndarray:
     return np.stack(copies)
 
 
-def model_proposer(model: object, strategy: str, steps: int | None = None) -> Proposer:
+def model_proposer(
+    model: object, strategy: str, steps: int | None = None, guidance: float | None = None
+) -> Proposer:
     """A proposer that samples LinkD (`linkd.sample.sample`) with the given retry strategy."""
     from linkd.sample import sample
 
     def propose(curves: np.ndarray, per_curve: int, seed: int) -> np.ndarray:
-        return sample(model, curves, per_curve, strategy, seed=seed, steps=steps).graphs
+        return sample(model, curves, per_curve, strategy, seed=seed, steps=steps,
+                      guidance=guidance).graphs  # fmt: skip
+
+    return propose
+
+
+def random_proposer() -> Proposer:
+    """The curve-blind baseline: curated mechanisms from linkd's random generator, as many as
+    LinkD would have sampled; everything after proposal is the same."""
+    from linkd.generator import generate
+
+    def propose(curves: np.ndarray, per_curve: int, seed: int) -> np.ndarray:
+        return generate(len(curves) * per_curve, np.random.default_rng([seed, 0x52414E44])).graphs
 
     return propose
 

@@ -37,6 +37,9 @@ class LinkDConfig:
     link_weight: float = 1.0  # BCE weight of present links; above 1 biases x0 towards links
     position_weight: float = 2.0
     huber_beta: float = 0.05
+    curve_dropout: float = 0.0  # training: share of graphs shown the null curve (for guidance)
+    guidance: float = 1.0  # default classifier-free guidance scale at inference (1: none)
+    sample_coins: bool = True  # draw validity and type as coins (False: deterministic DDIM)
 
 
 def link_mask(index: torch.Tensor) -> torch.Tensor:
@@ -71,6 +74,7 @@ class LinkD(nn.Module):
         self.encoder = CurveEncoder(c.dim, c.encoder_layers, c.heads)
         self.backbone = CausalBackbone(c.dim, c.layers, c.heads, c.cross_attention)
         self.head = DenoiseUNet(FEATURES, c.dim, tuple(c.head_widths), c.head_cond)
+        self.null_curve = nn.Parameter(torch.zeros(1, 1, c.dim))  # "no curve", for guidance
         self.register_buffer("alpha_bar", cosine_alpha_bar(c.diffusion_steps), persistent=False)
         self.register_buffer("binary", BINARY.clone(), persistent=False)
 
@@ -92,7 +96,11 @@ class LinkD(nn.Module):
         noised at `draws` random timesteps (the head is cheap next to the transformer).
         """
         c = self.config
-        h = self.backbone(graphs[:, :-1], self.encoder(curves))
+        cond = self.encoder(curves)
+        if self.training:  # (always in the graph, so every rank's DDP sees the parameter)
+            drop = torch.rand(len(cond), device=cond.device) < c.curve_dropout
+            cond = torch.where(drop[:, None, None], self.null_curve.to(cond.dtype), cond)
+        h = self.backbone(graphs[:, :-1], cond)
         valid = graphs[..., VALID] > 0.5
         before = torch.cat([torch.ones_like(valid[:, :1]), valid[:, :-1]], 1)
         active = before.cumprod(1).bool()
@@ -128,6 +136,10 @@ class LinkD(nn.Module):
         """(B, 200, 2) curves -> (B, 1 + P, dim): E(C) then the curve's patch tokens."""
         return self.encoder(curves)
 
+    def null_encoding(self, like: torch.Tensor) -> torch.Tensor:
+        """The encoding of "no curve", shaped like a batch of curve encodings."""
+        return self.null_curve.to(like.dtype).expand_as(like)
+
     def new_cache(self) -> list[dict]:
         return [{} for _ in self.backbone.blocks]
 
@@ -138,20 +150,50 @@ class LinkD(nn.Module):
         index: torch.Tensor,
         steps: int | None = None,
         generator: torch.Generator | None = None,
+        null_context: torch.Tensor | None = None,
+        guidance: float | None = None,
     ) -> torch.Tensor:
-        """Sample decoded rows (M, 24) for nodes `index` (M,) from their contexts (M, dim)."""
+        """Sample decoded rows (M, 24) for nodes `index` (M,) from their contexts (M, dim).
+
+        With `null_context` (the same nodes' contexts given no curve), the head's outputs are
+        pushed away from the unconditional ones by the guidance scale (classifier-free
+        guidance). Validity and type are drawn as coins from the head's first, pure-noise
+        estimate and then held: deterministic DDIM would otherwise always take the likelier
+        side, and graphs would never stop or gain ground joints as often as the data does.
+        """
+        c = self.config
+        w = c.guidance if guidance is None else guidance
         noise = torch.randn(
             (len(context), FEATURES), generator=generator, device=context.device
         ).to(context.dtype)
+        held = torch.zeros(FEATURES, dtype=torch.bool, device=context.device)
+        held[[VALID, TYPE]] = True
+        coins: list[torch.Tensor] = []
 
         def predict(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-            return self.clean_estimate(self.head(self.head_input(x_t, index), t, context))
+            x_in = self.head_input(x_t, index)
+            out = self.head(x_in, t, context)
+            if null_context is not None and w != 1.0:
+                out = out + (w - 1.0) * (out - self.head(x_in, t, null_context))
+            x0 = self.clean_estimate(out)
+            if not c.sample_coins:
+                return x0
+            if not coins:  # first step: draw validity and type with the predicted odds
+                p = (x0[:, held] + 1) / 2
+                u = torch.rand(p.shape, generator=generator, device=p.device).to(p.dtype)
+                coins.append((u < p).to(x0.dtype) * 2 - 1)
+            return _hold(x0, held, coins[0])
 
-        c = self.config
-        x0 = ddim_sample(
-            predict, noise, self.alpha_bar, steps or c.sample_steps, c.sample_eta, generator
-        )
+        x0 = ddim_sample(predict, noise, self.alpha_bar, steps or c.sample_steps, c.sample_eta,
+                         generator)  # fmt: skip
         return to_rows(x0, index)
+
+
+def _hold(x0: torch.Tensor, held: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+    """x0 with the `held` entries replaced by `values` (M, held.sum())."""
+    x0 = x0.clone()
+    x0[:, held] = values
+    return x0
 
 
 def save_checkpoint(path: str | Path, model: LinkD, **extra: object) -> None:
@@ -166,5 +208,7 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[LinkD, dict]
     config = dict(state["config"])
     config["head_widths"] = tuple(config["head_widths"])
     model = LinkD(LinkDConfig(**config)).to(device)
-    model.load_state_dict(state["model"])
+    weights = dict(state["model"])
+    weights.setdefault("null_curve", model.null_curve.detach())  # trained before guidance
+    model.load_state_dict(weights)
     return model.eval(), state
