@@ -171,3 +171,25 @@ def test_distributed_training_on_two_cpu_processes(data, tmp_path):
     gathered = torch.load(tmp_path / "r" / "gathered.pt")
     assert torch.equal(gathered[0], gathered[1])
     assert torch.equal(weights(load_checkpoint(tmp_path / "r" / "linkd.pt")[0]), gathered[0])
+
+
+def test_warm_start_adds_cross_attention_without_changing_the_model(data, tmp_path):
+    from linkd.model import save_checkpoint
+    from linkd.train import warm_start
+
+    torch.manual_seed(0)
+    plain = LinkD(PRESETS["tiny"].model)
+    with torch.no_grad():
+        for p in plain.parameters():
+            p.add_(0.1 * torch.randn_like(p))  # adaLN away from zero, as after training
+    save_checkpoint(tmp_path / "plain.pt", plain.eval())
+    grown = LinkD(replace(PRESETS["tiny"].model, cross_attention=True)).eval()
+    warm_start(grown, tmp_path / "plain.pt")
+    graphs, curves = data.graphs[:8], conditioning(data.curves[:8])
+    losses = []
+    for model in (plain, grown):
+        torch.manual_seed(1)
+        losses.append(model(graphs, curves)[0].item())
+    assert losses[0] == pytest.approx(losses[1], rel=1e-6)
+    with pytest.raises(ValueError, match="is"):
+        warm_start(LinkD(replace(PRESETS["tiny"].model, dim=48)), tmp_path / "plain.pt")
