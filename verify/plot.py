@@ -10,6 +10,7 @@ from linkd.mechanism import Mechanism
 from linkd.outdir import atomic_file
 
 from .analytic import joint_paths, rigid_parts
+from .screen import screen_polyline
 
 ANGLES = 400
 
@@ -21,6 +22,8 @@ def write_curve_plot(mech: Mechanism, path: str | Path, target: np.ndarray | Non
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
+    if target is not None:
+        target = screen_polyline(target[:, :2])
     paths = joint_paths(mech, ANGLES)
     traced = paths[mech.end_effector]
     fig = Figure(figsize=(6, 6), dpi=120)
