@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
     for alt in outcome.alternatives:
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "
-              f"{alt['chamfer']:.4f}, {alt['folder']}/")  # fmt: skip
+              f"{alt['chamfer']:.4f}, {out / alt['folder']}/")  # fmt: skip
     t = r["timings"]
     parts = ", ".join(f"{k[:-2]} {v:.1f}" for k, v in t.items() if k != "total_s")
     print(f"  {t['total_s']:.1f} s ({parts})")

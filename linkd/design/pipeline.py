@@ -30,6 +30,7 @@ from linkd import __version__
 from linkd.batch import LinkageBatch
 from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
+from linkd.validator import validate
 
 from .output import Delivered, deliver, finish, summary
 from .propose import Candidates, Proposer, model_proposer, place, propose, sub_mechanisms
@@ -115,7 +116,7 @@ def design(
             with stages.stage("write", "writing plots and report") as note:
                 report["timings"] = _timings(stages, start)
                 finish(found, points, o.formats, report)
-                note(f"{Path(out).name}/")
+                note(f"{out}/")
             found.folder = Path(out)
     except NoDesign as reason:
         stages.say(f"[red]no design[/]: {reason}")
@@ -143,12 +144,13 @@ def _search(
         note(f"{len(graphs)} designs")
     with stages.stage("align", "placing designs on the curve") as note:
         batch = LinkageBatch.from_graphs(graphs)
+        search["proposed"], search["valid"] = len(graphs), int(validate(batch).valid.sum())
         if o.every_joint:
             batch = sub_mechanisms(batch, target, o.placed)
         candidates = place(batch, target)
-        search["proposed"], search["valid"] = len(graphs), len(candidates)
+        search["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
-        note(f"{len(candidates)} valid{best}")
+        note(f"{search['valid']} valid, {len(candidates)} placed{best}")
     if len(candidates) == 0:
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
     score = candidates.chamfer.copy()
