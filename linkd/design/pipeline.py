@@ -159,8 +159,14 @@ def _search(
         rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
                                      o.refine_count, o.per_topology))  # fmt: skip
         deadline = start + o.time_budget - DELIVERY_RESERVE
+        total = o.refine_settings.iterations
         with stages.stage("refine", f"refining {len(rows)} designs") as note:
-            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline)
+            def progress(done: int, best: float) -> None:
+                stages.progress(f"refining {len(rows)} designs: iteration {done} of {total}, "
+                                f"best Chamfer {best:.4f}")  # fmt: skip
+
+            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline,
+                            progress)  # fmt: skip
             ok = result.ok
             candidates.batch.positions[rows[ok]] = result.positions[ok]
             score[rows[ok]] = result.chamfer[ok]
