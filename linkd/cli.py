@@ -21,6 +21,7 @@ start here:
   linkd view CURVE-design   watch it move
 
 `linkd COMMAND -h` explains each command."""
+
 ORDER = ("design", "export", "verify", "validate", "trace", "view", "dataset", "train", "eval",
          "bench")  # fmt: skip
 

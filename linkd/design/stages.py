@@ -31,9 +31,11 @@ class Stages:
         notes: list[str] = []
         start = time.perf_counter()
         spinner = self.console.status(label) if self.console else nullcontext()
-        with spinner as self.status:
-            yield notes.append
-        self.status = None
+        try:
+            with spinner as self.status:
+                yield notes.append
+        finally:
+            self.status = None
         seconds = time.perf_counter() - start
         self.seconds[name] = self.seconds.get(name, 0.0) + seconds
         if self.console:
