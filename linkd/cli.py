@@ -10,9 +10,17 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import textwrap
 
 from linkd import __version__
 from linkd.errors import InputError
+
+EPILOG = """\
+start here:
+  linkd design CURVE.csv    a verified linkage tracing your curve (see linkd design -h)
+  linkd view CURVE-design   watch it move
+
+`linkd COMMAND -h` explains each command."""
 
 ORDER = ("design", "export", "verify", "validate", "trace", "view", "dataset", "train", "eval",
          "bench")  # fmt: skip
@@ -27,8 +35,24 @@ def command_names() -> list[str]:
     return sorted(found, key=lambda name: (rank.get(name, len(ORDER)), name))
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions and epilogs keep their line breaks; every option with a default value
+    shows it, unless its help already says what it defaults to."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        default = action.default
+        if "default" in text or default in (None, argparse.SUPPRESS) or isinstance(default, bool):
+            return action.help
+        return f"{text} (default: %(default)s)"
+
+
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line usage errors (exit status 2)."""
+    """argparse with one-line usage errors (exit status 2) and defaults shown in the help."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"{self.prog}: error: {message}", file=sys.stderr)
@@ -36,11 +60,16 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="linkd", description="Design, export and verify planar linkages.")
+    parser = _Parser(prog="linkd", description="Design, export and verify planar linkages.",
+                     epilog=EPILOG)  # fmt: skip
     parser.add_argument("--version", action="version", version=f"linkd {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
+                                title="commands", metavar="COMMAND")  # fmt: skip
     for name in command_names():
         importlib.import_module(f"linkd.commands.{name}").register(sub)
+    for action in sub._choices_actions:  # each command's help opens with its one-line summary
+        command = sub.choices[action.dest]
+        command.description = command.description or textwrap.fill(action.help, 78)
     return parser
 
 

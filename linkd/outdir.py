@@ -11,6 +11,7 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import IO
 
 from linkd.errors import InputError
 
@@ -66,14 +67,22 @@ def fresh_name(base: Path) -> Path:
 
 def write_atomic(path: str | Path, text: str) -> None:
     """Write a text file through a temporary file in the same folder, then rename it."""
+    with atomic_file(path) as handle:
+        handle.write(text)
+
+
+@contextmanager
+def atomic_file(path: str | Path, binary: bool = False) -> Iterator[IO]:
+    """A temporary file beside `path`, open for writing; it becomes `path` (with the mode of
+    any new file) only when the block succeeds."""
     path = Path(path)
     if path.parent and not path.parent.is_dir():
         raise InputError(f"{path}: folder {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
     os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes it private; outputs are ordinary files
     try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
+        with os.fdopen(fd, "wb" if binary else "w") as handle:
+            yield handle
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

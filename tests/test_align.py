@@ -40,8 +40,12 @@ def test_recovers_a_known_similarity(curve, angle, reflect, log_scale, shift, st
     assert found.reflects == reflect
     error = np.abs(found.apply(candidate) - truth.apply(candidate)).max()
     assert error < 0.01 * _size(target)
+    # The fit is polished on 64 points per curve, so it lands near, not on, the optimum of the
+    # Chamfer distance of all points: within 0.1% of the curve's size of the true similarity's
+    # distance (measured: up to 0.026%). A bound relative to that distance is too tight: it is
+    # only the gap between the two samplings (2% of the size), and 1% of it was exceeded.
     best_possible = chamfer(truth.apply(candidate), target)
-    assert distances[0] <= 1.01 * best_possible
+    assert distances[0] <= best_possible + 0.001 * _size(target)
     assert distances[0] == pytest.approx(chamfer(found.apply(candidate), target), rel=1e-9)
 
 

@@ -5,6 +5,7 @@ checkpoint); the run with the shipped model is in test_design_cli.py.
 """
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -120,8 +121,14 @@ def test_design_writes_a_verified_export_on_the_users_curve(pool, curve_file, tm
     assert {"mechanism.json", "mechanism.xml", "scene.xml", "meshes", "animation.html",
             "curve.png", "report.json"} <= names  # fmt: skip
     assert list((out / "meshes").glob("*.stl"))
+    umask = os.umask(0)
+    os.umask(umask)
+    for path in [out, *out.rglob("*")]:  # ordinary files and folders, as the umask makes them
+        assert path.stat().st_mode & 0o777 == (0o777 if path.is_dir() else 0o666) & ~umask, path
     report = json.loads((out / "report.json").read_text())
     assert report["verification"]["passed"]
+    search = report["search"]  # the pool's designs are all valid; each offers sub-mechanisms
+    assert search["proposed"] == search["valid"] < search["placed"]
     assert {"read_s", "propose_s", "align_s", "refine_s", "verify_s", "total_s"} <= set(
         report["timings"]
     )

@@ -54,9 +54,14 @@ def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, caps
     assert report["design"]["chamfer"] < 0.1
     assert (out / "mechanism.xml").is_file() and list((out / "meshes").glob("*.stl"))
     assert "verified" in capsys.readouterr().out
-    # A second run does not overwrite the first: it takes a fresh name.
-    assert main([*args, "--export", "stl"]) == 0
+    # A second run does not overwrite the first: it takes a fresh name, the one the summary
+    # names the folder by in every line (relative, as the first run's name is).
+    assert main([*args, "--export", "stl", "--top", "1"]) == 0
     assert (tmp_path / "ellipse-design-2" / "mechanism.json").is_file()
+    printed = capsys.readouterr().out
+    assert printed.startswith("ellipse-design-2: ") and str(tmp_path) not in printed
+    for line in printed.splitlines():
+        assert "alternatives/" not in line or "ellipse-design-2/alternatives/" in line
     assert not (tmp_path / "ellipse-design-2" / "mechanism.xml").exists()
 
 

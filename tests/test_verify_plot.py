@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,9 @@ def test_curve_plot_is_a_drawn_png(tmp_path: Path) -> None:
     blue = (image[..., 2] > 150) & (image[..., 0] < 150)
     assert red.sum() > 100 and blue.sum() > 100  # the traced path and the target are drawn
     assert [p.name for p in tmp_path.iterdir()] == ["curve.png"]  # no temporary left behind
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # like any other output
 
 
 def test_curve_plot_of_a_locking_mechanism_writes_nothing(tmp_path: Path) -> None:

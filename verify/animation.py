@@ -4,7 +4,8 @@ meshcat's viewer is a single JavaScript bundle shipped in its wheel. The page in
 and the viewer commands (set_object, set_transform, set_animation, msgpack-encoded, as meshcat's
 own `static_html` does), so it opens offline from a file and needs no server to be written. The
 parts move with the analytic kinematics of mechanism.json; the traced path and the target curve
-are drawn as lines. The scene is centred and scaled so the mechanism spans about two viewer units.
+are drawn as lines (the target at the resolution a screen shows, however many points it has).
+The scene is centred and scaled so the mechanism spans about two viewer units.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from linkd.outdir import write_atomic
 
 from .analytic import joint_paths, rigid_parts
+from .screen import screen_polyline
 
 FRAMES = 120  # animation keyframes per revolution
 PERIOD = 4.0  # seconds per revolution
@@ -241,7 +243,8 @@ def scene_commands(
     ee = paths[mech.end_effector]
     commands.append(_line(ee[:-1], lift, 0xD62728, root.append("traced_path")))
     if target is not None:
-        commands.append(_line(np.asarray(target)[:, :2], lift, 0x1F77B4, root.append("target")))
+        drawn_target = screen_polyline(np.asarray(target)[:, :2])
+        commands.append(_line(drawn_target, lift, 0x1F77B4, root.append("target")))
     commands.append(SetAnimation(animation, play=True, repetitions=float("inf")))
     return _stable_ids([command.lower() for command in commands])
 

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from linkd.mechanism import Mechanism
+from linkd.outdir import atomic_file
 
 from .analytic import joint_paths, rigid_parts
+from .screen import screen_polyline
 
 ANGLES = 400
 
@@ -22,6 +22,8 @@ def write_curve_plot(mech: Mechanism, path: str | Path, target: np.ndarray | Non
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
+    if target is not None:
+        target = screen_polyline(target[:, :2])
     paths = joint_paths(mech, ANGLES)
     traced = paths[mech.end_effector]
     fig = Figure(figsize=(6, 6), dpi=120)
@@ -51,16 +53,5 @@ def write_curve_plot(mech: Mechanism, path: str | Path, target: np.ndarray | Non
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"{mech.n_nodes}-joint linkage: target and traced curve")
     fig.tight_layout()
-    _save_atomic(fig, Path(path))
-
-
-def _save_atomic(fig: object, path: Path) -> None:
-    """Write through a temporary file beside `path`, renamed into place once complete."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            fig.savefig(handle, format="png")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_file(path, binary=True) as handle:
+        fig.savefig(handle, format="png")

@@ -14,26 +14,71 @@ from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
 STRATEGIES = ("node", "graph", "oneshot")
 PROPOSERS = ("model", "random")
 
+DESCRIPTION = """\
+Design a one-degree-of-freedom planar linkage whose end effector traces the
+curve in CURVE.csv, prove in MuJoCo that it moves as designed, and write it
+to a new folder."""
+
+EPILOG = """\
+curve file:
+  one "x,y" point per row, in order along the path, in your units (--units);
+  a header row, # comments, and comma, semicolon, tab or space separators are
+  fine; at least 8 points. A closed path need not repeat its first point.
+
+output folder (OUT), written only when complete (nothing if the run fails):
+  mechanism.json   the design, in your frame and units
+  mechanism.xml    MuJoCo model (with --export mjcf), in metres whatever --units
+  meshes/*.stl     each part as a solid (with --export stl), in metres
+  animation.html   one crank revolution, opens offline in a browser
+  report.json      curve error, verification figures, timings
+  curve.png        your curve, the traced path and the linkage
+  Without --out, OUT is <curve>-design in the current folder, or
+  <curve>-design-2, -3, ... if that name is taken: nothing is overwritten.
+  An OUT given with --out replaces an earlier linkd result there; any other
+  non-empty folder is refused. --force replaces OUT (with no --out:
+  <curve>-design) whatever it holds.
+
+examples:
+  linkd design assets/examples/crescent.csv
+  linkd design my_path.csv --units cm --out my-linkage --seed 3 --top 2
+  linkd view crescent-design
+
+exit status: 0 a design was written, 1 no valid design was found, 2 bad input."""
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("design", help="design a linkage whose end effector traces a curve")
-    p.add_argument("curve", help="target curve: CSV of x,y points along a closed path")
-    p.add_argument("--export", default="mjcf,stl", help="formats, comma separated: mjcf, stl")
-    p.add_argument("--out", help="output folder (default: <curve>-design, a new name)")
-    p.add_argument("--force", action="store_true", help="replace OUT even if it is not an output")
-    p.add_argument("--seed", type=int, default=0, help="random seed (runs are repeatable)")
+    p = sub.add_parser("design", help="design a linkage whose end effector traces a curve",
+                       description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
+    p.add_argument("curve", metavar="CURVE.csv",
+                   help="target curve: x,y points along the path (see below)")  # fmt: skip
+    p.add_argument("--export", default="mjcf,stl", metavar="FORMATS",
+                   help="comma separated: mjcf (MuJoCo model), stl (part meshes)")  # fmt: skip
+    p.add_argument("--out", help="output folder (default: <curve>-design, a name not yet taken)")
+    p.add_argument("--force", action="store_true",
+                   help="replace OUT whatever it holds (see below)")  # fmt: skip
+    p.add_argument("--seed", type=int, default=0, metavar="S",
+                   help="random seed: the same seed gives the same design")  # fmt: skip
     units = ", ".join(UNITS_IN_METRES)
-    p.add_argument("--units", default=DEFAULT_UNITS, help=f"the curve's units: {units}")
-    p.add_argument("--strategy", default="node", help="LinkD sampling: node, graph or oneshot")
-    p.add_argument("--candidates", type=int, default=512, help="designs to sample")
+    p.add_argument("--units", default=DEFAULT_UNITS, metavar="UNIT",
+                   help=f"unit of the curve's numbers: {units}")  # fmt: skip
+    p.add_argument("--strategy", default="node",
+                   help="LinkD sampling: node (retry each joint), graph (retry whole designs) "
+                   "or oneshot (no retry)")  # fmt: skip
+    p.add_argument("--candidates", type=int, default=512, metavar="N",
+                   help="designs LinkD samples (more: a closer fit, slower)")  # fmt: skip
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="deliver the best sample as it is, only placed on the curve")  # fmt: skip
-    p.add_argument("--top", type=int, default=0, help="also write alternative topologies")
-    p.add_argument("--time-budget", type=float, default=30.0, help="seconds for the whole run")
-    p.add_argument("--model", help="LinkD checkpoint (default: the one shipped with linkd)")
+    p.add_argument("--top", type=int, default=0, metavar="K",
+                   help="also write K verified alternatives of other topologies to "
+                   "OUT/alternatives/")  # fmt: skip
+    p.add_argument("--time-budget", type=float, default=30.0, metavar="SECONDS",
+                   help="for the whole run: sampling and refinement stop early to keep it; "
+                   "export and verification always finish")  # fmt: skip
+    p.add_argument("--model", metavar="CHECKPOINT",
+                   help="LinkD checkpoint (default: the one shipped with linkd)")  # fmt: skip
     p.add_argument("--proposer", default="model",
-                   help="where candidates come from: model (LinkD, default) or random (linkd's "
-                        "generator, blind to the curve: the baseline)")  # fmt: skip
+                   help="where candidates come from: model (LinkD) or random (linkd's "
+                   "generator, blind to the curve: the baseline)")  # fmt: skip
     p.set_defaults(run=run)
 
 
@@ -95,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
     for alt in outcome.alternatives:
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "
-              f"{alt['chamfer']:.4f}, {alt['folder']}/")  # fmt: skip
+              f"{alt['chamfer']:.4f}, {out / alt['folder']}/")  # fmt: skip
     t = r["timings"]
     parts = ", ".join(f"{k[:-2]} {v:.1f}" for k, v in t.items() if k != "total_s")
     print(f"  {t['total_s']:.1f} s ({parts})")

@@ -18,12 +18,25 @@ FORMATS = ("mjcf", "stl")
 SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "density")
 
 
+EPILOG = """\
+The MuJoCo model and the STL parts are in metres whatever the mechanism's units.
+Part sizes not given are chosen from the mechanism's size. OUT appears only
+when complete; an earlier linkd result there is replaced, any other non-empty
+folder is refused unless --force.
+
+example:
+  linkd export crescent-design/mechanism.json --export mjcf --out crescent-mjcf"""
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("export", help="write a MuJoCo model (MJCF) and STL parts of a mechanism")
+    p = sub.add_parser("export", help="write a MuJoCo model (MJCF) and STL parts of a mechanism",
+                       epilog=EPILOG)  # fmt: skip
     p.add_argument("mechanism", help="mechanism.json")
-    p.add_argument("--export", default="mjcf,stl", help="formats, comma separated: mjcf, stl")
-    p.add_argument("--out", help="output folder (default: <mechanism>-export, a new name)")
-    p.add_argument("--force", action="store_true", help="replace OUT even if it is not an output")
+    p.add_argument("--export", default="mjcf,stl", metavar="FORMATS",
+                   help="comma separated: mjcf (MuJoCo model), stl (part meshes)")  # fmt: skip
+    p.add_argument("--out", help="output folder (default: <mechanism>-export, a name not yet "
+                   "taken)")  # fmt: skip
+    p.add_argument("--force", action="store_true", help="replace OUT whatever it holds")
     for name in SIZES:
         unit = "kg/m^3" if name == "density" else "mechanism units"
         flag = "--" + name.replace("_", "-")

@@ -31,11 +31,13 @@ def minimise(
     history: int = 10,
     first_step: float = 0.01,
     deadline: float | None = None,
+    on_iteration: Callable[[int], None] | None = None,
 ) -> tuple[torch.Tensor, int]:
     """Minimise the B independent functions of `evaluate` from x (B, D); returns (x, iterations).
 
     first_step: the length of a steepest-descent step (the first one, or after a reset).
     deadline: a `time.monotonic()` value after which no new iteration starts.
+    on_iteration: called with the number of iterations done after each one (for progress).
     """
     bsz, dim = x.shape
     s_hist = x.new_zeros(bsz, history, dim)
@@ -45,7 +47,7 @@ def minimise(
     every = torch.arange(bsz)
     f, g = evaluate(x, every)
     done = 0
-    for done in range(1, iterations + 1):  # noqa: B007
+    for done in range(1, iterations + 1):
         active = (plain >= SHORTEST) & (g.norm(dim=1) > FLAT)
         fresh = (rho == 0).all(1)  # no history: this step is steepest descent
         direction = _direction(g, s_hist, y_hist, rho, plain)
@@ -84,6 +86,8 @@ def minimise(
         plain = torch.where(moved & fresh, (plain * 2).clamp_max(10 * first_step), plain)
         rho[failed] = 0
         x, f, g = x_new, f_new, g_new
+        if on_iteration is not None:
+            on_iteration(done)
         if not active.any() or (deadline is not None and time.monotonic() > deadline):
             break
     return x, done

@@ -30,6 +30,7 @@ from linkd import __version__
 from linkd.batch import LinkageBatch
 from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
+from linkd.validator import validate
 
 from .output import Delivered, deliver, finish, summary
 from .propose import (
@@ -124,7 +125,7 @@ def design(
             with stages.stage("write", "writing plots and report") as note:
                 report["timings"] = _timings(stages, start)
                 finish(found, points, o.formats, report)
-                note(f"{Path(out).name}/")
+                note(f"{out}/")
             found.folder = Path(out)
     except NoDesign as reason:
         stages.say(f"[red]no design[/]: {reason}")
@@ -155,12 +156,13 @@ def _search(
         note(f"{len(graphs)} designs")
     with stages.stage("align", "placing designs on the curve") as note:
         batch = LinkageBatch.from_graphs(graphs)
+        search["proposed"], search["valid"] = len(graphs), int(validate(batch).valid.sum())
         if o.every_joint:
             batch = sub_mechanisms(batch, target, o.placed)
         candidates = place(batch, target)
-        search["proposed"], search["valid"] = len(graphs), len(candidates)
+        search["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
-        note(f"{len(candidates)} valid{best}")
+        note(f"{search['valid']} valid, {len(candidates)} placed{best}")
     if len(candidates) == 0:
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
     score = candidates.chamfer.copy()
@@ -169,8 +171,14 @@ def _search(
         rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
                                      o.refine_count, o.per_topology))  # fmt: skip
         deadline = start + o.time_budget - DELIVERY_RESERVE
+        total = o.refine_settings.iterations
         with stages.stage("refine", f"refining {len(rows)} designs") as note:
-            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline)
+            def progress(done: int, best: float) -> None:
+                stages.progress(f"refining {len(rows)} designs: iteration {done} of {total}, "
+                                f"best Chamfer {best:.4f}")  # fmt: skip
+
+            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline,
+                            progress)  # fmt: skip
             ok = result.ok
             candidates.batch.positions[rows[ok]] = result.positions[ok]
             score[rows[ok]] = result.chamfer[ok]

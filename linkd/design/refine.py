@@ -69,14 +69,16 @@ def refine(
     target: np.ndarray,
     settings: RefineSettings | None = None,
     deadline: float | None = None,
+    progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     """Refine every linkage of `batch` towards the closed `target` curve (M, 2).
 
     Positions and target must share a frame in which the target is normalised. `deadline` is a
-    `time.monotonic()` value: refinement stops early when it passes.
+    `time.monotonic()` value: refinement stops early when it passes. `progress` is called after
+    each iteration with the iterations done and the best Chamfer distance so far.
     """
     with single_thread():
-        return _refine(batch, target, settings or RefineSettings(), deadline)
+        return _refine(batch, target, settings or RefineSettings(), deadline, progress)
 
 
 @contextmanager
@@ -100,17 +102,23 @@ def _phase(
     weights: torch.Tensor,
     s: RefineSettings,
     deadline: float | None,
+    on_iteration: Callable[[int], None] | None = None,
 ) -> tuple[torch.Tensor, int]:
     """L-BFGS on the variants `rows` from x, with the ordered term's `weights` (per variant);
     returns the last iterates and the iterations run."""
     if iterations <= 0 or (deadline is not None and time.monotonic() > deadline):
         return x, 0
     return minimise(lambda v, r: evaluate(v, rows[r], weights[r]), x, iterations,
-                    first_step=s.first_step, deadline=deadline)  # fmt: skip
+                    first_step=s.first_step, deadline=deadline,
+                    on_iteration=on_iteration)  # fmt: skip
 
 
 def _refine(
-    batch: LinkageBatch, target: np.ndarray, s: RefineSettings, deadline: float | None
+    batch: LinkageBatch,
+    target: np.ndarray,
+    s: RefineSettings,
+    deadline: float | None,
+    progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     copies = len(s.ordered_weights)
     variants = batch.subset(np.repeat(np.arange(len(batch)), copies))
@@ -137,10 +145,18 @@ def _refine(
     evaluate(x, every, torch.zeros_like(weights))  # the start counts as an iterate too
     # First every variant, with the ordered term; then only the best few, on Chamfer alone.
     first = min(s.ordered_iterations, s.iterations)
-    x, done = _phase(evaluate, x, every, first, weights, s, deadline)
+
+    def report(before: int) -> Callable[[int], None] | None:
+        """Progress after an iteration of the phase that starts after `before` iterations."""
+        if progress is None:
+            return None
+        return lambda done: progress(before + done, float(best_chamfer.min()))
+
+    x, done = _phase(evaluate, x, every, first, weights, s, deadline, report(0))
     keep = torch.as_tensor(np.argsort(best_chamfer, kind="stable")[: s.keep])
     zero = torch.zeros_like(weights)
-    _, more = _phase(evaluate, x[keep], keep, s.iterations - first, zero, s, deadline)
+    _, more = _phase(evaluate, x[keep], keep, s.iterations - first, zero, s, deadline,
+                     report(done))  # fmt: skip
     # Each candidate's better variant.
     pick = best_chamfer.reshape(len(batch), copies).argmin(1) + copies * np.arange(len(batch))
     return RefineResult(best[pick], best_chamfer[pick], done + more)
