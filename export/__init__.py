@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
+from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
@@ -57,6 +58,9 @@ def export_mechanism(
     unknown = set(formats) - FORMATS
     if unknown:
         raise ValueError(f"unknown export format {', '.join(sorted(unknown))}")
+    size = size_problem(mech.positions, mech.units, "mechanism", MECHANISM_RANGE_M)
+    if size:
+        raise ValueError(size)
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
         raise ValueError(f"invalid mechanism: {status.reason}")

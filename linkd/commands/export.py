@@ -13,6 +13,7 @@ from pathlib import Path
 from linkd.errors import InputError
 from linkd.mechanism import Mechanism
 from linkd.outdir import fresh_name, staged_output, write_atomic
+from linkd.scale import check_mechanism_size
 
 FORMATS = ("mjcf", "stl")
 SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "density")
@@ -52,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     if status:
         print(f"{args.mechanism}: invalid: {status.reason}")
         return 1
+    check_mechanism_size(mech.positions, mech.units, args.mechanism)
     given = {name: getattr(args, name) for name in SIZES if getattr(args, name) is not None}
     options = ExportOptions(**given)
     try:
