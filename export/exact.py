@@ -109,7 +109,7 @@ def solve_exact(problem: ExactProblem, time_limit: float = TIME_LIMIT) -> ExactL
     cost[top] = cost[used] = weight
     cost[steps] = 1
     lower, upper = np.zeros(count), np.ones(count)
-    lower[z + [top]], upper[z + [top]] = 1, n
+    lower[[*z, top]], upper[[*z, top]] = 1, n
     matrix = coo_matrix((rows.vals, (rows.rows, rows.cols)), shape=(len(rows.lower), count))
     result = milp(cost, integrality=np.ones(count), bounds=Bounds(lower, upper),
                   constraints=LinearConstraint(matrix.tocsr(), rows.lower, np.inf),

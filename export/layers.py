@@ -14,7 +14,7 @@ from a cover plate over the stack instead (the two plates are one rigid frame).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import combinations
+from itertools import combinations, pairwise
 
 import numpy as np
 
@@ -45,8 +45,8 @@ class Layout:
     count: int  # number of layers, base and cover plates included
     min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
     minimal: bool = True  # the search proved that fewer layers cannot work
-    steps: dict[int, tuple[int, int]] = field(default_factory=dict)  # stepped link -> layers of
-    # its halves at its first and second joint (`stepped`); the link's own layer is the first
+    steps: dict = field(default_factory=dict)  # stepped link -> its pieces (from, to, layer),
+    # fractions of the way from its first joint (`stepped`); `layers` has its first piece's
 
 
 @dataclass(frozen=True)
@@ -58,17 +58,32 @@ class Plate:
     part: int
     joints: tuple[int, ...]  # joints it has holes for
     layer: int
-    toward: int | None = None  # a half plate: the link's other joint, whose midway it reaches
+    segment: tuple[float, float] | None = None  # a piece of a stepped link: the stretch of it
+    # from this fraction of the way from its first joint to its second, to that one
 
 
 @dataclass(frozen=True)
 class Spacer:
-    """The standoff joining the two halves of a stepped link at its middle, between layers."""
+    """The standoff (a link width across) joining two pieces of a stepped link where it steps."""
 
     name: str
     part: int
-    joints: tuple[int, int]  # the link's joints (it stands midway between them)
-    layers: tuple[int, int]  # the layers of the half plates it joins, low then high
+    at: float  # fraction of the way from the link's first joint to its second
+    layers: tuple[int, int]  # the layers of the pieces it joins, low then high
+
+
+def plate_points(positions: np.ndarray, assembly: Assembly, plate: Plate) -> np.ndarray:
+    """(k, 2) points whose discs (a link width across) a plate is the hull of."""
+    if plate.segment is None:
+        return positions[list(plate.joints)]
+    a, b = positions[list(assembly.parts[plate.part].joints)]
+    return np.array([a + f * (b - a) for f in plate.segment])
+
+
+def spacer_point(positions: np.ndarray, assembly: Assembly, spacer: Spacer) -> np.ndarray:
+    """(2,) where a spacer stands, in the frame of `positions`."""
+    a, b = positions[list(assembly.parts[spacer.part].joints)]
+    return a + spacer.at * (b - a)
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
@@ -81,17 +96,22 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     for p, part in enumerate(assembly.parts[1:], start=1):
         if p in layout.steps:
             a, b = part.joints
-            out += [Plate(f"{part.name}_at_{j}", p, (j,), level, other)
-                    for j, other, level in zip((a, b), (b, a), layout.steps[p])]  # fmt: skip
+            for k, (start, end, level) in enumerate(layout.steps[p]):
+                holes = (a,) * (start == 0) + (b,) * (end == 1)
+                out.append(Plate(f"{part.name}_piece{k}", p, holes, level, (start, end)))
         else:
             out.append(Plate(part.name, p, part.joints, int(layout.layers[p])))
     return out
 
 
 def spacers(assembly: Assembly, layout: Layout) -> list[Spacer]:
-    """The spacers of the stepped links."""
-    return [Spacer(f"{assembly.parts[p].name}_spacer", p, assembly.parts[p].joints,
-                   (min(levels), max(levels))) for p, levels in sorted(layout.steps.items())]  # fmt: skip
+    """The spacers of the stepped links, one where each steps from a layer to another."""
+    out = []
+    for p, runs in sorted(layout.steps.items()):
+        for k, (low, high) in enumerate(pairwise(runs)):
+            levels = (min(low[2], high[2]), max(low[2], high[2]))
+            out.append(Spacer(f"{assembly.parts[p].name}_spacer{k}", p, low[1], levels))
+    return out
 
 
 @dataclass(frozen=True)

@@ -22,73 +22,70 @@ from .options import Sizes
 from .parts import Assembly, Part, Pin
 
 
+def cuts(length: float, width: float) -> tuple[float, ...]:
+    """Where a link of `length` may step, as fractions of the way from its first joint: a link
+    width from each end (a short link: its middle). A step that near a joint lets the link leave
+    its pin's layers at once, as a pin stopping at the plates it joins would."""
+    near = width / length
+    return (0.5,) if near >= 1 / 3 else (near, 1 - near)
+
+
 def split_links(
-    assembly: Assembly, paths: np.ndarray, kinds: tuple[str, ...] = ("link",)
-) -> tuple[Assembly, np.ndarray, list[int]]:
-    """The assembly with every binary link split in two halves at its middle, which becomes an
-    extra joint (index N + k) held by a spacer pin; the paths with those middles appended; and
-    the part of every piece."""
+    assembly: Assembly, paths: np.ndarray, width: float
+) -> tuple[Assembly, np.ndarray, list[int], dict[int, tuple[float, ...]]]:
+    """The assembly with every binary link cut into pieces at its `cuts`, each cut an extra
+    joint (index N + k) held by a spacer pin; the paths with those cuts appended; the part of
+    every piece; and the cuts of every link."""
     n = len(paths)
     pieces: list[Part] = []
     owner: list[int] = []
     piece_at: dict[tuple[int, int], int] = {}  # (part, joint) -> piece
-    middles, spacers = [], []
+    extra, spacers, where = [], [], {}
     for p, part in enumerate(assembly.parts):
-        if part.kind not in kinds:
+        if part.kind != "link":
             piece_at.update({(p, j): len(pieces) for j in part.joints})
             pieces.append(part)
             owner.append(p)
             continue
-        middle = n + len(middles)
-        middles.append(_step_point(assembly, paths, p))
-        halves = []
-        for j in part.joints:
-            piece_at[(p, j)] = len(pieces)
-            halves.append(len(pieces))
-            pieces.append(Part(f"{part.name}_at_{j}", "half", (j, middle)))
+        a, b = part.joints
+        where[p] = cuts(float(np.linalg.norm(paths[a, 0] - paths[b, 0])), width)
+        ends = [a]
+        for f in where[p]:
+            ends.append(n + len(extra))
+            extra.append((1 - f) * paths[a] + f * paths[b])
+        ends.append(b)
+        first = len(pieces)
+        for k in range(len(ends) - 1):
+            pieces.append(Part(f"{part.name}_piece{k}", "piece", (ends[k], ends[k + 1])))
             owner.append(p)
-        spacers.append(Pin(f"{part.name}_spacer", middle, halves[0], tuple(halves)))
+        for k, cut in enumerate(ends[1:-1]):
+            members = (first + k, first + k + 1)
+            spacers.append(Pin(f"{part.name}_spacer{k}", cut, members[0], members))
+        piece_at[(p, a)], piece_at[(p, b)] = first, len(pieces) - 1
     pins = [
         Pin(pin.name, pin.joint, piece_at[(pin.hub, pin.joint)],
-            tuple(piece_at[(m, pin.joint)] for m in pin.members))  # fmt: skip
+            tuple(piece_at[(m, pin.joint)] for m in pin.members))
         for pin in assembly.pins
-    ]
+    ]  # fmt: skip
     split = Assembly(pieces, [], pins + spacers, [])
-    extended = np.concatenate([paths, np.array(middles).reshape(-1, *paths.shape[1:])])
-    return split, extended, owner
+    extended = np.concatenate([paths, np.array(extra).reshape(-1, *paths.shape[1:])])
+    return split, extended, owner, where
 
 
-STEP_AT = np.linspace(0.15, 0.85, 15)  # candidate places of a link's step, along it
+def _runs(bounds: list[float], levels: np.ndarray) -> tuple[tuple[float, float, int], ...]:
+    """Consecutive pieces on one layer merged: (from, to, layer) along the link."""
+    runs: list[tuple[float, float, int]] = []
+    for k, level in enumerate(levels.tolist()):
+        if runs and runs[-1][2] == level:
+            runs[-1] = (runs[-1][0], bounds[k + 1], level)
+        else:
+            runs.append((bounds[k], bounds[k + 1], level))
+    return tuple(runs)
 
 
-def _step_point(assembly: Assembly, paths: np.ndarray, part: int) -> np.ndarray:
-    """(T, 2) path of the place along a link where its step goes: the candidate that the
-    fewest other parts come near (then the one they stay farthest from)."""
-    from .layers import hull_edges, _point_segment
-
-    a, b = assembly.parts[part].joints
-    edges = [e for e in hull_edges(assembly, paths[:, 0]) if e[0] not in (0, part)]
-    if not edges:
-        return (paths[a] + paths[b]) / 2
-    points = paths[..., 0] + 1j * paths[..., 1]
-    owner = np.array([e[0] for e in edges])
-    start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]
-    best, choice = None, (paths[a] + paths[b]) / 2
-    for f in STEP_AT:
-        at = (1 - f) * points[a] + f * points[b]
-        gap = _point_segment(at, start, end).min(-1)  # per edge
-        per_part = np.full(owner.max() + 1, np.inf)
-        np.minimum.at(per_part, owner, gap)
-        per_part = per_part[np.isfinite(per_part)]
-        key = (np.sort(per_part)[:3].tolist())
-        if best is None or key > best:
-            best, choice = key, np.stack([at.real, at.imag], -1)
-    return choice
-
-
-def stepped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes, kinds=("link",)) -> Layout:
+def stepped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """A layout where links may step between layers (ValueError if even that cannot be built)."""
-    split, extended, owner = split_links(assembly, paths, kinds)
+    split, extended, owner, where = split_links(assembly, paths, sizes.link_width)
     n_real = len(assembly.pins)
     wide = frozenset(range(n_real, len(split.pins)))
     conflicts = find_conflicts(split, extended, sizes, wide)
@@ -102,7 +99,7 @@ def stepped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes, kinds=("
         pins.append((members, [q - 1 for q in blocked if owner[q] not in mine]))
         if k < n_real and 0 in pin.members:
             grounded.add(k)
-    pairs = [(m[0], other) for m, _ in pins[n_real:] for other in m[1:]]
+    pairs = [(m[0], m[1]) for m, _ in pins[n_real:]]
     found = solve_exact(ExactProblem(conflict[1:, 1:], pins, grounded, pairs))
     if found is None:
         raise ValueError(
@@ -111,15 +108,15 @@ def stepped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes, kinds=("
         )
     levels = np.array([0, *found.layers])
     layers = np.zeros(len(assembly.parts), dtype=int)
-    steps: dict[int, tuple[int, int]] = {}
+    steps = {}
     for piece, p in enumerate(owner):
         if piece and not layers[p]:
             layers[p] = levels[piece]
-    for p, part in enumerate(assembly.parts):
-        if part.kind == "link":
-            ends = tuple(int(levels[owner.index(p) + k]) for k in range(2))
-            if ends[0] != ends[1]:
-                steps[p] = ends
+    for p, fractions in where.items():
+        first = owner.index(p)
+        runs = _runs([0.0, *fractions, 1.0], levels[first : first + len(fractions) + 1])
+        if len(runs) > 1:
+            steps[p] = runs
     spans = []
     top = found.stack + 1
     for k, pin in enumerate(split.pins[:n_real]):

@@ -49,11 +49,11 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     formats = parse_formats(args.export)
     mech = Mechanism.load(args.mechanism)
+    check_mechanism_size(mech.positions, mech.units, args.mechanism)
     status, _ = validate_mechanism(mech)
     if status:
         print(f"{args.mechanism}: invalid: {status.reason}")
         return 1
-    check_mechanism_size(mech.positions, mech.units, args.mechanism)
     given = {name: getattr(args, name) for name in SIZES if getattr(args, name) is not None}
     options = ExportOptions(**given)
     try:
