@@ -15,10 +15,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
+from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
-from .layers import Layout, assign_layers, plates, sweep
+from .layers import Layout, assign_layers, plate_points, plates, spacer_point, spacers, sweep
 from .mjcf import build_mjcf, build_scene, qpos_at, servo_gains
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
@@ -57,6 +58,9 @@ def export_mechanism(
     unknown = set(formats) - FORMATS
     if unknown:
         raise ValueError(f"unknown export format {', '.join(sorted(unknown))}")
+    size = size_problem(mech.positions, mech.units, "mechanism", MECHANISM_RANGE_M)
+    if size:
+        raise ValueError(size)
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
         raise ValueError(f"invalid mechanism: {status.reason}")
@@ -81,20 +85,34 @@ def export_mechanism(
 def _write_meshes(
     mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, out_dir: Path
 ) -> dict:
-    """One STL per plate in its body's frame, metres; returns plate name -> relative path."""
-    from .meshes import write_plate
+    """One STL per plate and spacer in its body's frame, metres; returns name -> relative path."""
+    from .meshes import write_plate, write_spacer
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
     (out_dir / MESHES).mkdir(exist_ok=True)
     meshes = {}
     for plate in plates(assembly, layout):
-        points = (mech.positions[list(plate.joints)] - origins[plate.part]) * unit
+        origin = origins[plate.part]
+        points = (plate_points(mech.positions, assembly, plate) - origin) * unit
+        holes = (mech.positions[list(plate.joints)] - origin) * unit
         path = f"{MESHES}/{plate.name}.stl"
         write_plate(out_dir / path, points, sizes.link_width * unit, sizes.hole_diameter * unit,
-                    sizes.thickness * unit)  # fmt: skip
+                    sizes.thickness * unit, holes)  # fmt: skip
         meshes[plate.name] = path
+    for spacer in spacers(assembly, layout):
+        centre = (spacer_point(mech.positions, assembly, spacer) - origins[spacer.part]) * unit
+        path = f"{MESHES}/{spacer.name}.stl"
+        height = spacer_height(spacer, sizes) * unit
+        write_spacer(out_dir / path, centre, sizes.link_width * unit, height)
+        meshes[spacer.name] = path
     return meshes
+
+
+def spacer_height(spacer, sizes: Sizes) -> float:
+    """A spacer's length: from the top of its lower plate to the bottom of its upper one."""
+    low, high = spacer.layers
+    return (high - low) * sizes.pitch - sizes.thickness
 
 
 def _write_model(
@@ -114,10 +132,21 @@ def describe_parts(assembly: Assembly, layout: Layout, sizes: Sizes, meshes: dic
     """JSON descriptions of the plates and pins (sizes in the mechanism's units)."""
     out = []
     for plate in plates(assembly, layout):
-        entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
-                 "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
+        part = assembly.parts[plate.part]
+        entry = {"name": plate.name, "kind": part.kind, "joints": list(plate.joints),
+                 "layer": plate.layer}  # fmt: skip
+        if plate.segment is not None:
+            entry.update(kind="link piece", link=list(part.joints), along=list(plate.segment))
         if plate.name in meshes:
             entry["mesh"] = meshes[plate.name]
+        out.append(entry)
+    for spacer in spacers(assembly, layout):
+        entry = {"name": spacer.name, "kind": "spacer",
+                 "link": list(assembly.parts[spacer.part].joints), "at": spacer.at,
+                 "layers": list(spacer.layers), "diameter": sizes.link_width,
+                 "length": spacer_height(spacer, sizes)}  # fmt: skip
+        if spacer.name in meshes:
+            entry["mesh"] = meshes[spacer.name]
         out.append(entry)
     for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
         out.append({

@@ -13,6 +13,7 @@ from pathlib import Path
 from linkd.errors import InputError
 from linkd.mechanism import Mechanism
 from linkd.outdir import fresh_name, staged_output, write_atomic
+from linkd.scale import check_mechanism_size
 
 FORMATS = ("mjcf", "stl")
 SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "density")
@@ -61,6 +62,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     formats = parse_formats(args.export)
     mech = Mechanism.load(args.mechanism)
+    check_mechanism_size(mech.positions, mech.units, args.mechanism)
     status, _ = validate_mechanism(mech)
     if status:
         print(f"{args.mechanism}: invalid: {status.reason}")

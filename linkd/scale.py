@@ -1,0 +1,59 @@
+"""The sizes linkd can build, checked before any work so extremes fail with one clear line.
+
+Exported parts follow a mechanism's own scale (`linkd.export.options`). Below about a millimetre
+across, MuJoCo refuses the plates' meshes (their volume is under its floor); above about a
+kilometre its solver tolerances no longer close the loops (`linkd verify` fails mobility and
+kinematics at 10 km). A designed mechanism spans its curve and usually several times more, so a
+curve is held to a smaller top size than a mechanism.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from linkd.errors import InputError
+from linkd.mechanism import UNITS_IN_METRES
+
+MECHANISM_RANGE_M = (1e-3, 1e3)  # across, metres: what export and verification handle
+CURVE_RANGE_M = (1e-3, 1e2)  # across, metres: leaves room for the mechanism around the curve
+
+
+def across(points: np.ndarray) -> float:
+    """The larger side of the points' bounding box (0 for no points; NaN stays NaN)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    return float(np.ptp(points, axis=0).max()) if len(points) else 0.0
+
+
+def _metres(value: float) -> str:
+    """A length in words: '1 mm', '100 m', '1 km'."""
+    for unit, size in (("km", 1e3), ("m", 1.0), ("mm", 1e-3)):
+        if value >= size:
+            return f"{value / size:g} {unit}"
+    return f"{value / 1e-3:g} mm"
+
+
+def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float, float]) -> str:
+    """'' when `points` (in `units`) span a buildable size, else the one-line reason."""
+    size = across(points) * UNITS_IN_METRES[units]
+    low, high = limits
+    if low <= size <= high:
+        return ""
+    return (
+        f"the {what} is {across(points):.3g} {units} across ({_metres(size) if size else '0'}); "
+        f"linkd builds {what}s from {_metres(low)} to {_metres(high)} across "
+        f"(rescale it, or {'set --units' if what == 'curve' else 'change its units'})"
+    )
+
+
+def check_curve_size(points: np.ndarray, units: str, name: str) -> None:
+    """InputError naming the curve's size and the buildable range when it lies outside."""
+    problem = size_problem(points, units, "curve", CURVE_RANGE_M)
+    if problem:
+        raise InputError(f"{name}: {problem}")
+
+
+def check_mechanism_size(points: np.ndarray, units: str, name: str) -> None:
+    """InputError naming the mechanism's size and the buildable range when it lies outside."""
+    problem = size_problem(points, units, "mechanism", MECHANISM_RANGE_M)
+    if problem:
+        raise InputError(f"{name}: {problem}")

@@ -1,0 +1,51 @@
+"""Scale extremes: curves and mechanisms too small or too large to build are refused up front
+with one line naming the size and the range (exit 2, nothing written, no traceback)."""
+
+import numpy as np
+import pytest
+
+from linkd import classic
+from linkd.cli import main
+from linkd.export import export_mechanism
+from linkd.geometry import Similarity
+from linkd.scale import CURVE_RANGE_M
+
+
+def _ellipse(path, size):
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    np.savetxt(path, np.c_[size / 2 * np.cos(t), size / 4 * np.sin(t)], delimiter=",")
+
+
+@pytest.mark.parametrize("size", [1e12, 1e-12])
+def test_design_refuses_a_curve_outside_the_buildable_range(tmp_path, capsys, size):
+    curve, out = tmp_path / "curve.csv", tmp_path / "out"
+    _ellipse(curve, size)
+    assert main(["design", str(curve), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "curve.csv" in err[0]
+    assert f"{size:.3g} mm across" in err[0] and "from 1 mm to 100 m" in err[0]
+    assert not out.exists()
+
+
+def test_design_range_is_in_the_curves_units(tmp_path):
+    """50 m is fine; the same numbers in inches are too; 500 m is not."""
+    curve = tmp_path / "curve.csv"
+    _ellipse(curve, 50.0)
+    low, high = CURVE_RANGE_M
+    assert low <= 50.0 <= high and not 500.0 <= high
+    _ellipse(curve, 500.0)
+    assert main(["design", str(curve), "--units", "m", "--out", str(tmp_path / "o")]) == 2
+
+
+@pytest.mark.parametrize("scale", [1e12, 1e-9])
+def test_export_refuses_a_mechanism_outside_the_buildable_range(tmp_path, capsys, scale):
+    mech = classic.crank_rocker().transformed(Similarity(scale))
+    path, out = tmp_path / "m.json", tmp_path / "out"
+    mech.save(path)
+    assert main(["export", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "from 1 mm to 1 km across" in err[0]
+    assert not out.exists()
+    with pytest.raises(ValueError, match="mechanism is"):
+        export_mechanism(mech, tmp_path)
+    assert not (tmp_path / "mechanism.json").exists()
