@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from linkd import constraints
 from linkd.errors import InputError
 from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
 
@@ -30,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=0, help="also write alternative topologies")
     p.add_argument("--time-budget", type=float, default=30.0, help="seconds for the whole run")
     p.add_argument("--model", help="LinkD checkpoint (default: the one shipped with linkd)")
+    constraints.add_arguments(p)
     p.set_defaults(run=run)
 
 
@@ -58,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         base = Path(f"{Path(args.curve).stem}-design")
         out = base if args.force else fresh_name(base)
+    limits = constraints.from_args(args)
     single = args.candidates == 1 and not args.refine
     options = DesignOptions(
         candidates=args.candidates,
@@ -72,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         every_joint=not single,
         attempts=1 if single else DesignOptions.attempts,
         model=args.model,
+        constraints=limits,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:
@@ -84,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
+    if "constraints" in r:
+        print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
     for alt in outcome.alternatives:
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "
               f"{alt['chamfer']:.4f}, {alt['folder']}/")  # fmt: skip
