@@ -66,7 +66,7 @@ class Box:
         return Box(float(x0), float(y0), float(x1), float(y1))
 
     def to_list(self) -> list[float]:
-        return [self.x0, self.y0, self.x1, self.y1]
+        return [float(v) for v in (self.x0, self.y0, self.x1, self.y1)]
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,9 @@ class Constraints:
             value = getattr(self, name)
             out[name] = value.to_list() if isinstance(value, Box) else value
         if "motor_at" in out:
-            out["motor_at"] = list(out["motor_at"])
+            out["motor_at"] = [float(v) for v in out["motor_at"]]
+        if "min_link" in out:
+            out["min_link"] = float(out["min_link"])
         return out
 
 
