@@ -123,7 +123,8 @@ def test_batched_screening_matches_the_exact_check():
     batched = measure_batch(LinkageBatch.from_mechanisms(mechs), c, 720)
     for row, mech in enumerate(mechs):
         for m in check(mech, c):
-            assert batched[m.name][1][row] == pytest.approx(m.margin, abs=1e-3 * (1 + abs(m.margin)))
+            tolerance = 1e-3 * (1 + abs(m.margin))
+            assert batched[m.name][1][row] == pytest.approx(m.margin, abs=tolerance)
 
 
 def test_max_joints_prunes_sub_mechanisms_before_ranking():
@@ -188,8 +189,8 @@ def run(pool, curve, out, limits: Constraints, refine: bool = True):
         return pool[np.resize(order, len(curves) * per_curve)]
 
     quick = RefineSettings(iterations=20, ordered_iterations=5)
-    opts = DesignOptions(candidates=12, time_budget=600, refine_settings=quick,
-                         formats=frozenset({"mjcf"}), constraints=limits, refine=refine)  # fmt: skip
+    opts = DesignOptions(candidates=12, time_budget=600, refine_settings=quick, refine=refine,
+                         formats=frozenset({"mjcf"}), constraints=limits)  # fmt: skip
     return design(curve, out, opts, proposer=propose, show=False)
 
 
@@ -226,5 +227,6 @@ def test_no_design_within_an_envelope_names_it_and_writes_nothing(small, tmp_pat
     outcome = run(pool, curve, tmp_path / "out", Constraints(envelope=cramped), refine=False)
     assert outcome.design is None
     reason = outcome.report["reason"]
-    assert reason.startswith("no design keeps every joint inside the envelope") and "sweep" in reason
+    assert reason.startswith("no design keeps every joint inside the envelope")
+    assert "sweep" in reason
     assert list(tmp_path.iterdir()) == []
