@@ -230,3 +230,16 @@ def test_no_design_within_an_envelope_names_it_and_writes_nothing(small, tmp_pat
     assert reason.startswith("no design keeps every joint inside the envelope")
     assert "sweep" in reason
     assert list(tmp_path.iterdir()) == []
+
+
+def test_bench_setup_is_consistent_around_a_curve():
+    """The benchmark's constraints: motor below the curve, inside the ground box and the
+    envelope; the ground box under the curve; the curve inside the envelope."""
+    from linkd.design.bench import constraint_setup
+
+    curve = 100 * np.stack([np.cos(np.arange(50) / 8), 0.5 * np.sin(np.arange(50) / 8)], 1)
+    c = constraint_setup(curve)
+    motor = np.array(c.motor_at)
+    assert motor[1] < curve[:, 1].min()
+    assert c.ground_box.margin(motor) > 0 and c.envelope.margin(motor) > 0
+    assert c.ground_box.y1 < curve[:, 1].min() and (c.envelope.margin(curve) > 0).all()
