@@ -51,9 +51,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
     d.add_argument("--json", help="also write the figures to this JSON file")
-    d.add_argument("--setup", default="plain", choices=("plain", "user", "constrained"),
+    d.add_argument("--setup", default="plain",
+                   choices=("plain", "user", "constrained", "no-motor"),
                    help="curves as given; placed in a user's frame (mm); or placed there "
-                        "with designer's constraints around each (linkd.design.bench)")  # fmt: skip
+                        "with designer's constraints around each, with or without the motor "
+                        "point (linkd.design.bench)")  # fmt: skip
     d.set_defaults(run=design)
 
 

@@ -8,7 +8,8 @@ a temporary folder and thrown away.
 
 `--setup user` first places each curve in a user's frame (USER_SCALE mm per unit, moved by
 USER_OFFSET); `--setup constrained` also gives it a designer's constraints built around it
-(`constraint_setup`), and checks each delivered design against them again.
+(`constraint_setup`), and checks each delivered design against them again; `--setup
+no-motor` gives the same constraints but the motor point (an ablation: what pinning costs).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from linkd.errors import InputError
 from .pipeline import DesignOptions, design
 from .propose import Proposer
 
-SETUPS = ("plain", "user", "constrained")
+SETUPS = ("plain", "user", "constrained", "no-motor")
 USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])
 
 
@@ -97,8 +98,10 @@ def run_bench(
             curve, limits = file, Constraints()
             if setup != "plain":
                 curve = placed_curve(file, Path(scratch))
-            if setup == "constrained":
+            if setup in ("constrained", "no-motor"):
                 limits = constraint_setup(read_curve(curve))
+                if setup == "no-motor":
+                    limits = replace(limits, motor_at=None)
                 if k == 0:
                     say(f"constraints for {file.name}: {limits.to_dict()}")
             start = time.perf_counter()
