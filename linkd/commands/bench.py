@@ -54,6 +54,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="candidates from LinkD or from the curve-blind generator")  # fmt: skip
     d.add_argument("--guidance", type=float, help="LinkD guidance scale (default: the model's)")
     d.add_argument("--json", help="also write the figures to this JSON file")
+    d.add_argument("--setup", default="plain",
+                   choices=("plain", "user", "constrained", "no-motor"),
+                   help="curves as given; placed in a user's frame (mm); or placed there "
+                        "with designer's constraints around each, with or without the motor "
+                        "point (linkd.design.bench)")  # fmt: skip
     d.set_defaults(run=design)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from linkd import constraints
 from linkd.errors import InputError
 from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
 
@@ -79,6 +80,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--proposer", default="model",
                    help="where candidates come from: model (LinkD) or random (linkd's "
                    "generator, blind to the curve: the baseline)")  # fmt: skip
+    constraints.add_arguments(p)
     p.set_defaults(run=run)
 
 
@@ -112,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         base = Path(f"{Path(args.curve).stem}-design")
         out = base if args.force else fresh_name(base)
+    limits = constraints.from_args(args)
     single = args.candidates == 1 and not args.refine
     options = DesignOptions(
         candidates=args.candidates,
@@ -127,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
         attempts=1 if single else DesignOptions.attempts,
         model=args.model,
         proposer=args.proposer,
+        constraints=limits,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:
@@ -139,6 +143,8 @@ def run(args: argparse.Namespace) -> int:
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
+    if "constraints" in r:
+        print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
     for alt in outcome.alternatives:
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "
               f"{alt['chamfer']:.4f}, {out / alt['folder']}/")  # fmt: skip

@@ -5,6 +5,11 @@ its curve error (Chamfer distance, 2000 and 200 points on both curves, in the ta
 normalised frame, no further alignment: see `select.curve_error`), its joint count and the
 seconds the run took (the model is loaded once, before the first curve). Designs are written to
 a temporary folder and thrown away.
+
+`--setup user` first places each curve in a user's frame (USER_SCALE mm per unit, moved by
+USER_OFFSET); `--setup constrained` also gives it a designer's constraints built around it
+(`constraint_setup`), and checks each delivered design against them again; `--setup
+no-motor` gives the same constraints but the motor point (an ablation: what pinning costs).
 """
 
 from __future__ import annotations
@@ -12,15 +17,46 @@ from __future__ import annotations
 import json
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from linkd.curves import write_curve
+from linkd.constraints import Box, Constraints, check
+from linkd.curves import read_curve, write_curve
 from linkd.errors import InputError
 
 from .pipeline import DesignOptions, design
 from .propose import Proposer
+
+SETUPS = ("plain", "user", "constrained", "no-motor")
+USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])
+
+
+def constraint_setup(points: np.ndarray) -> Constraints:
+    """Constraints around a curve (M, 2), S the larger side of its bounding box: the motor
+    S/4 below its lowest point, under its middle; fixed joints in a box 2 S wide from S/10
+    to 3 S/2 below the curve; every joint within an envelope reaching 3 S/2 beyond the curve
+    on every side; links at least S/50; at most 10 joints; transmission angles within
+    [15, 165] degrees."""
+    (x0, y0), (x1, y1) = points.min(0), points.max(0)
+    size, middle = max(x1 - x0, y1 - y0), (x0 + x1) / 2
+    reach = 1.5 * size
+    return Constraints(
+        motor_at=(float(middle), float(y0 - size / 4)),
+        ground_box=Box(middle - size, y0 - reach, middle + size, y0 - size / 10),
+        envelope=Box(x0 - reach, y0 - reach, x1 + reach, y1 + reach),
+        min_link=size / 50,
+        max_joints=10,
+        min_transmission=15.0,
+    )
+
+
+def placed_curve(file: Path, folder: Path) -> Path:
+    """The curve of `file` in the user's frame, written to `folder`."""
+    placed = folder / file.name
+    write_curve(placed, read_curve(file) * USER_SCALE + USER_OFFSET)
+    return placed
 
 
 def curve_files(sources: list[str], limit: int | None = None) -> list[Path]:
@@ -51,15 +87,34 @@ def dataset_curves(root: str, count: int, folder: Path) -> list[Path]:
     return files
 
 
-def run_bench(files: list[Path], options: DesignOptions, proposer: Proposer, say=print) -> dict:
-    """Design every curve; returns per-curve rows and the totals."""
+def run_bench(
+    files: list[Path], options: DesignOptions, proposer: Proposer, say=print, setup: str = "plain"
+) -> dict:
+    """Design every curve (placed and constrained as `setup` says); returns per-curve rows and
+    the totals."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="linkd-bench-") as scratch:
         for k, file in enumerate(files):
+            curve, limits = file, Constraints()
+            if setup != "plain":
+                curve = placed_curve(file, Path(scratch))
+            if setup in ("constrained", "no-motor"):
+                limits = constraint_setup(read_curve(curve))
+                if setup == "no-motor":
+                    limits = replace(limits, motor_at=None)
+                if k == 0:
+                    say(f"constraints for {file.name}: {limits.to_dict()}")
             start = time.perf_counter()
-            outcome = design(file, Path(scratch) / f"{k}", options, proposer, show=False)
+            outcome = design(curve, Path(scratch) / f"{k}", replace(options, constraints=limits),
+                             proposer, show=False)  # fmt: skip
             seconds = time.perf_counter() - start
             rows.append(_row(file, outcome, seconds))
+            if limits:
+                delivered = outcome.design
+                rows[-1]["constraints_hold"] = delivered is not None and all(
+                    m.holds for m in check(delivered.mechanism, limits)
+                )
+                rows[-1]["reason"] = outcome.report.get("reason")
             say(_line(rows[-1]))
     return {"curves": rows, "total": totals(rows)}
 
@@ -93,7 +148,16 @@ def totals(rows: list[dict]) -> dict:
         "seconds_mean": stat("seconds", np.mean),
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
+        **_held(rows),
     }
+
+
+def _held(rows: list[dict]) -> dict:
+    """Of the delivered designs, the share that meets every constraint (constrained runs)."""
+    checked = [r["constraints_hold"] for r in rows if "constraints_hold" in r and r["valid"]]
+    if not any("constraints_hold" in r for r in rows):
+        return {}
+    return {"constraints_held_rate": float(np.mean(checked)) if checked else None}
 
 
 def _fmt(value, spec: str) -> str:
@@ -110,6 +174,8 @@ def _line(row: dict) -> str:
         f"joints {_fmt(row['nodes'], 'd'):>2}",
         f"{row['seconds']:6.1f} s",
     ]
+    if row.get("reason"):
+        cells.append(row["reason"])
     return "  ".join(cells)
 
 
@@ -126,15 +192,21 @@ def summary_table(total: dict) -> str:
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
     ]  # fmt: skip
+    if "constraints_held_rate" in t:
+        lines.append(("constraints", f"{_fmt(t['constraints_held_rate'], '.1%')} of delivered "
+                                     "designs meet every one"))  # fmt: skip
     return "\n".join(f"{name:<16}{value}" for name, value in lines)
 
 
-def write_json(path: str | Path, results: dict, options: DesignOptions) -> None:
+def write_json(
+    path: str | Path, results: dict, options: DesignOptions, setup: str = "plain"
+) -> None:
     from linkd.outdir import write_atomic
 
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
-                "refine": options.refine, "proposer": options.proposer}  # fmt: skip
+                "refine": options.refine, "proposer": options.proposer,
+                "setup": setup}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 
@@ -157,8 +229,8 @@ def main(args) -> int:
             files += dataset_curves(args.dataset, args.limit or 100, Path(folder))
         if not files:
             raise InputError("bench design: give curve files or folders, or --dataset")
-        results = run_bench(files[: args.limit], options, proposer)
+        results = run_bench(files[: args.limit], options, proposer, setup=args.setup)
     print(summary_table(results["total"]))
     if args.json:
-        write_json(args.json, results, options)
+        write_json(args.json, results, options, args.setup)
     return 0

@@ -13,6 +13,11 @@ Stages, each timed and shown on a terminal:
             prove it in MuJoCo until one passes (and as many alternatives as asked for);
 6. write    curve.png, animation.html and report.json; the folder appears all at once.
 
+A designer's constraints (`linkd.constraints`, in the user's frame) are honoured from the
+start: too many joints never reach alignment, a motor point fixes each placement's translation,
+candidates that nearly meet them are refined first, refinement keeps them as barriers (and the
+crank pivot pinned), and each design is checked exactly in the user's units before export.
+
 The time budget bounds proposal and refinement (refinement stops when the time left is what
 delivery needs); delivery always runs. A run is deterministic for a seed on one machine as long
 as the budget does not cut refinement short (report.json says whether it did).
@@ -28,10 +33,12 @@ import numpy as np
 
 from linkd import __version__
 from linkd.batch import LinkageBatch
+from linkd.constraints import Constraints, binding, check, describe, no_design
 from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
 from linkd.validator import validate
 
+from .constrained import pin, prune, rank, screen, tightened
 from .output import Delivered, deliver, finish, summary
 from .propose import (
     Candidates,
@@ -69,6 +76,8 @@ class DesignOptions:
     model: str | None = None  # checkpoint; None: the shipped one
     proposer: str = "model"  # "model": LinkD; "random": the generator, blind to the curve
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
+    # Designer's constraints, in the curve's frame and units (contract §5).
+    constraints: Constraints = field(default_factory=Constraints)
 
 
 class NoDesign(Exception):
@@ -104,12 +113,15 @@ def design(
         target, frame = normalise(resample(points, N_POINTS))
         note(f"{len(points)} points from {Path(curve_path).name}")
     search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
+    if o.constraints:
+        search["constraints"] = o.constraints.to_dict()
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
     try:
         with single_thread(), staged_output(out, force) as stage:
-            candidates = _search(target, o, proposer, stages, start, search)
-            found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source)
+            candidates = _search(target, frame, o, proposer, stages, start, search)
+            found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
+                                                     source)  # fmt: skip
             report = {
                 "format": "linkd-design-report/1",
                 "curve": {
@@ -118,6 +130,7 @@ def design(
                     "units": o.units,
                 },
                 "design": summary(found),
+                **({"constraints": [m.to_dict() for m in measured]} if measured else {}),
                 "search": search,
                 "alternatives": alternatives,
                 "timings": {},
@@ -136,6 +149,7 @@ def design(
 
 def _search(
     target: np.ndarray,
+    frame,
     o: DesignOptions,
     proposer: Proposer | None,
     stages: Stages,
@@ -143,6 +157,7 @@ def _search(
     search: dict,
 ) -> Candidates:
     """Propose, place and refine; each candidate's `chamfer` is its latest curve error."""
+    inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         search["proposer"] = o.proposer
         if proposer is None and o.proposer == "random":
@@ -158,11 +173,19 @@ def _search(
         batch = LinkageBatch.from_graphs(graphs)
         search["proposed"], search["valid"] = len(graphs), int(validate(batch).valid.sum())
         if o.every_joint:
-            batch = sub_mechanisms(batch, target, o.placed)
-        candidates = place(batch, target)
+            batch = sub_mechanisms(batch, target, o.placed, inner.max_joints)
+        batch = prune(batch, inner.max_joints)
+        candidates = place(batch, target) if len(batch) else Candidates(batch, np.zeros(0))
+        if inner.motor_at is not None:
+            candidates = pin(candidates, target, np.array(inner.motor_at))
+        if inner:
+            candidates = rank(candidates, inner)
         search["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
         note(f"{search['valid']} valid, {len(candidates)} placed{best}")
+    if len(candidates) == 0 and inner.max_joints is not None:
+        raise NoDesign(f"no design has at most {inner.max_joints} joints: none of the "
+                       f"{len(graphs)} sampled designs offers a valid one that small")  # fmt: skip
     if len(candidates) == 0:
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
     score = candidates.chamfer.copy()
@@ -177,8 +200,9 @@ def _search(
                 stages.progress(f"refining {len(rows)} designs: iteration {done} of {total}, "
                                 f"best Chamfer {best:.4f}")  # fmt: skip
 
-            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline,
-                            progress)  # fmt: skip
+            settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
+            result = refine(candidates.batch.subset(rows), target, settings, deadline,
+                            inner or None, progress)  # fmt: skip
             ok = result.ok
             candidates.batch.positions[rows[ok]] = result.positions[ok]
             score[rows[ok]] = result.chamfer[ok]
@@ -199,18 +223,32 @@ def _deliver(
     stages: Stages,
     stage: Path,
     source: dict,
-) -> tuple[Delivered, list[dict]]:
-    """Verify designs from the best until one passes; then the alternatives, if asked for."""
+) -> tuple[Delivered, list[dict], list]:
+    """Verify designs from the best until one passes; then the alternatives, if asked for.
+    With constraints, only designs that meet them all, measured exactly in the user's units,
+    are exported; the measurements of the one delivered come back too."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
+    c = o.constraints
+    if c:
+        feasible, screened = screen(batch, frame, c)
+        if not feasible.any():
+            raise NoDesign(binding(screened, c, o.units))
+        order = order[feasible[order]]
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
-        found, tried = None, 0
+        found, tried, measured, unmet = None, 0, [], []
         for row in order[: o.attempts]:
             tried += 1
-            mech = to_mechanism(batch, int(row), frame, o.units)
+            mech, measured = _checked(batch, int(row), frame, o)
+            if mech is None:  # within the screening's sampling, but not exactly
+                unmet.append(next(m for m in measured if not m.holds))
+                continue
             found = deliver(mech, points, stage, o.formats, source)
             if found:
                 break
+        if found is None and unmet and len(unmet) == tried:
+            raise NoDesign(f"{no_design(unmet[0], o.units)}; in the best, "
+                           f"{describe(unmet[0], o.units)}")  # fmt: skip
         if found is None:
             raise NoDesign(f"none of the best {tried} designs passed validation and MuJoCo")
         note(f"{found.mechanism.n_nodes} joints, {found.export.layers} layers, passed "
@@ -220,7 +258,23 @@ def _deliver(
             alternatives = _alternatives(candidates, order, int(row), frame, points, o, stage,
                                          source)  # fmt: skip
             note(f"{len(alternatives)} alternatives")
-    return found, alternatives
+    return found, alternatives, measured
+
+
+def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions) -> tuple:
+    """The candidate `row` in the user's frame and units, its crank pivot exactly on the motor
+    point if one was given, and each constraint measured on it; no mechanism (None) when one
+    of them does not hold."""
+    mech = to_mechanism(batch, row, frame, o.units)
+    c = o.constraints
+    if not c:
+        return mech, []
+    if c.motor_at is not None:  # exactly there, not up to the rounding of the frame change
+        positions = mech.positions.copy()
+        positions[mech.motor[0]] = c.motor_at
+        mech = mech.replace(positions=positions)
+    measured = check(mech, c)
+    return (mech if all(m.holds for m in measured) else None), measured
 
 
 def _alternatives(candidates, order, chosen, frame, points, o, stage, source) -> list[dict]:
@@ -235,15 +289,18 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
             rows.append(int(row))
     listed: list[dict] = []
     for row in rows[: o.attempts * o.top]:
+        mech, measured = _checked(batch, row, frame, o)
+        if mech is None:
+            continue
         folder = stage / "alternatives" / str(len(listed) + 1)
         folder.mkdir(parents=True, exist_ok=True)
-        mech = to_mechanism(batch, row, frame, o.units)
         alt = deliver(mech, points, folder, o.formats, {**source, "alternative": len(listed) + 1})
         if alt is None:
             continue
-        finish(alt, points, o.formats, {"design": summary(alt)})
+        extra = {"constraints": [m.to_dict() for m in measured]} if measured else {}
+        finish(alt, points, o.formats, {"design": summary(alt), **extra})
         listed.append({"rank": len(listed) + 1, "folder": f"alternatives/{folder.name}",
-                       **summary(alt)})  # fmt: skip
+                       **summary(alt), **extra})  # fmt: skip
         if len(listed) == o.top:
             break
     for folder in (stage / "alternatives" / str(len(listed) + 1), stage / "alternatives"):

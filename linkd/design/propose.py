@@ -85,9 +85,11 @@ def propose(
     return proposer(curves.astype(np.float32), per_curve, seed)
 
 
-def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> LinkageBatch:
+def sub_mechanisms(
+    batch: LinkageBatch, target: np.ndarray, keep: int, max_joints: int | None = None
+) -> LinkageBatch:
     """The `keep` sub-mechanisms of `batch` (in dyadic order, as decoded from graph matrices)
-    whose paths look most like the target.
+    whose paths look most like the target (of those with at most `max_joints` joints).
 
     Every moving joint of a valid dyadic linkage traces a curve of its own, and the joints it
     hangs on (its ancestors, down to the crank and the ground) form a smaller valid linkage
@@ -101,20 +103,17 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
     moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread(paths).numpy() > MOVES)
     moving[:, :2] = False  # the crank tip only turns in a circle
     rows, joints = np.nonzero(moving)
+    needed = _needed(batch.adjacency[rows], joints)
+    if max_joints is not None:
+        small = needed.sum(1) <= max_joints
+        rows, joints, needed = rows[small], joints[small], needed[small]
     if len(rows) == 0:
         return batch  # nothing valid moves: `place` finds no candidate
     if len(rows) > keep:
         curves = resample_closed(paths[rows, joints].double(), 64)
         gap = _descriptor(curves) - _descriptor(torch.as_tensor(target)[None])
         best = torch.topk(gap.norm(dim=1), keep, largest=False).indices.sort().values.numpy()
-        rows, joints = rows[best], joints[best]
-    n = batch.valid.shape[1]
-    parents = np.tril(batch.adjacency[rows], -1)  # dyadic order: parents come first
-    needed = np.zeros((len(rows), n), bool)
-    needed[np.arange(len(rows)), joints] = True
-    needed[:, :2] = True  # the motor
-    for _ in range(n):  # each pass adds the parents of what is needed
-        needed |= (parents & needed[:, :, None]).any(1)
+        rows, joints, needed = rows[best], joints[best], needed[best]
     order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
     pick = order[:, :, None]
     adjacency = np.take_along_axis(batch.adjacency[rows], pick, 1)
@@ -127,6 +126,19 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
         adjacency & valid[:, :, None] & valid[:, None, :],
         valid.sum(1) - 1,  # the chosen joint comes last among those it needs
     )
+
+
+def _needed(adjacency: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """(K, N) the joints each of `joints` hangs on, itself and the motor included, in linkages
+    of dyadic order (parents come first) with links `adjacency` (K, N, N)."""
+    n = adjacency.shape[1]
+    parents = np.tril(adjacency, -1)
+    needed = np.zeros((len(joints), n), bool)
+    needed[np.arange(len(joints)), joints] = True
+    needed[:, :2] = True  # the motor
+    for _ in range(n):  # each pass adds the parents of what is needed
+        needed |= (parents & needed[:, :, None]).any(1)
+    return needed
 
 
 def _descriptor(curves: torch.Tensor) -> torch.Tensor:

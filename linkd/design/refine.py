@@ -12,7 +12,8 @@ Soft penalties keep each candidate buildable: every dyad's squared transmission 
 a margin over the whole cycle (far from locking, transmission angles away from 0 and pi), links
 keep a minimum length, joints stay apart and near the curve. The best iterate within the hard
 limits is kept per candidate, so refinement never returns something worse than it was given or
-something invalid.
+something invalid. A designer's constraints add their own terms and hard limits
+(`linkd.design.constrained`); with a motor point the crank pivot does not move.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import numpy as np
 import torch
 
 from linkd.batch import LinkageBatch
+from linkd.constraints import Constraints
 from linkd.design.lbfgs import minimise
 from linkd.kinematics import trace
 from linkd.topology import Plan, assembly_plan
@@ -69,16 +71,20 @@ def refine(
     target: np.ndarray,
     settings: RefineSettings | None = None,
     deadline: float | None = None,
+    constraints: Constraints | None = None,
     progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     """Refine every linkage of `batch` towards the closed `target` curve (M, 2).
 
     Positions and target must share a frame in which the target is normalised. `deadline` is a
-    `time.monotonic()` value: refinement stops early when it passes. `progress` is called after
-    each iteration with the iterations done and the best Chamfer distance so far.
+    `time.monotonic()` value: refinement stops early when it passes. `constraints` (in that
+    frame) add the ground-box and envelope terms and pin the crank pivot to the motor point.
+    `progress` is called after each iteration with the iterations done and the best Chamfer
+    distance so far.
     """
     with single_thread():
-        return _refine(batch, target, settings or RefineSettings(), deadline, progress)
+        return _refine(batch, target, settings or RefineSettings(), deadline, constraints,
+                       progress)
 
 
 @contextmanager
@@ -118,12 +124,14 @@ def _refine(
     target: np.ndarray,
     s: RefineSettings,
     deadline: float | None,
+    constraints: Constraints | None = None,
     progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     copies = len(s.ordered_weights)
     variants = batch.subset(np.repeat(np.arange(len(batch)), copies))
     plan = assembly_plan(variants.adjacency, variants.fixed, variants.valid)
-    objective = Objective(variants, plan, target, s)
+    objective = Objective(variants, plan, target, s, constraints)
+    pinned = constraints is not None and constraints.motor_at is not None
     shape = variants.positions.shape
     best = variants.positions.copy()
     best_chamfer = np.full(len(variants), np.inf)
@@ -132,6 +140,8 @@ def _refine(
         x = x.detach().reshape(len(rows), *shape[1:]).requires_grad_(True)
         terms = objective(x, rows, weight)
         (grad,) = torch.autograd.grad(terms.loss.sum(), x)
+        if pinned:
+            grad[:, 0] = 0  # the crank pivot stays on the motor point
         chamfer = terms.chamfer.detach().numpy()
         index = rows.numpy()
         better = terms.ok.numpy() & (chamfer < best_chamfer[index])
@@ -172,8 +182,20 @@ class Terms:
 class Objective:
     """The refinement objective for one batch and one target, evaluated on joint positions."""
 
-    def __init__(self, batch: LinkageBatch, plan: Plan, target: np.ndarray, s: RefineSettings):
+    def __init__(
+        self,
+        batch: LinkageBatch,
+        plan: Plan,
+        target: np.ndarray,
+        s: RefineSettings,
+        constraints: Constraints | None = None,
+    ):
         self.plan, self.s = plan, s
+        self.barriers = None
+        if constraints:
+            from linkd.design.constrained import Barriers
+
+            self.barriers = Barriers(batch, constraints)
         self.end_effector = torch.as_tensor(batch.end_effector)
         self.target = torch.as_tensor(np.asarray(target, dtype=np.float32))
         upper = np.triu(batch.adjacency, 1)
@@ -204,9 +226,13 @@ class Objective:
         radius = torch.sqrt((positions**2).sum(-1) + 1e-12)
         far = torch.where(valid, torch.relu(radius - s.max_radius), 0).pow(2).sum(1)
         penalty = lock + short + close + far
+        ok = torch.isfinite(chamfer)
+        if self.barriers is not None:
+            extra, inside = self.barriers(positions, motion.x, motion.y, rows)
+            penalty, ok = penalty + extra, ok & inside
 
         with torch.no_grad():
-            ok = (worst.amin(1) >= s.min_margin) & torch.isfinite(chamfer)
+            ok &= worst.amin(1) >= s.min_margin
             ok &= ~(links & (d < s.min_link)).any((1, 2))
             ok &= ~(unlinked & (d < s.min_gap)).any((1, 2))
         loss = chamfer + s.penalty_weight * penalty

@@ -1,0 +1,180 @@
+"""The design search under a designer's constraints (`linkd.constraints`), so that what reaches
+the final check already meets them and stays accurate.
+
+Everything here works in the target's normalised frame, on constraints mapped into it:
+- `prune`: candidates with more joints than allowed never reach alignment;
+- `pin`: with a motor point, each placed candidate is moved by the similarity that best fits its
+  path to the target among those that map its crank pivot exactly onto the motor point (the
+  translation follows from rotation and scale, which stay free, fitted by ICP about the point);
+- `rank`: candidates that nearly meet the constraints already go first, so they are refined;
+- `Barriers`: refinement terms keeping fixed joints in the ground box and every joint in the
+  envelope over the cycle (soft quadratic penalties, with hard limits on the kept iterate), and
+  `tightened`: refinement settings raised to the shortest link and transmission angle asked for.
+  The pinned crank pivot is not moved by refinement at all (its gradient is zero).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from linkd.batch import LinkageBatch
+from linkd.constraints import Constraints, measure_batch
+from linkd.geometry import Similarity
+from linkd.validator import validate
+
+from .propose import Candidates
+from .refine import RefineSettings, resample_closed
+
+# Inner margins (normalised units, the target's RMS radius is 1) for the ground box and the
+# envelope: the iterate refinement keeps must stay HARD inside; the penalty pushes towards SOFT.
+HARD, SOFT = 0.005, 0.04
+EXTRA_DEGREES = (0.5, 4.0)  # the same for the transmission angle: hard and soft, over the limit
+LINK_FACTOR = 1.02  # hard limit on link length, times the shortest allowed
+PIN_POINTS, PIN_STEPS = 64, 10  # points per curve and ICP steps of the pinned fit
+RANK_WEIGHT = 0.5  # weight of the constraint violation beside the Chamfer distance in `rank`
+
+
+def prune(batch: LinkageBatch, max_joints: int | None) -> LinkageBatch:
+    """The linkages of `batch` with at most `max_joints` joints."""
+    if max_joints is None:
+        return batch
+    return batch.subset(np.flatnonzero(batch.valid.sum(1) <= max_joints))
+
+
+def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
+    """Re-place placed candidates so that each crank pivot lies exactly on `motor`, with the
+    rotation and scale about it that fit the path best; sorted by the new Chamfer distance."""
+    batch = candidates.batch
+    if len(batch) == 0:
+        return candidates
+    result = validate(batch, keep_motion=True)
+    paths = torch.as_tensor(result.end_effector_paths(batch), dtype=torch.float64)
+    pivot = torch.as_tensor(batch.positions[:, 0])
+    goal = torch.as_tensor(target, dtype=torch.float64) - torch.as_tensor(motor)
+    even = resample_closed(paths, len(target)) - pivot[:, None]  # about the pivot
+    every = max(1, len(target) // PIN_POINTS)
+    u, v = even[:, ::every].float(), goal[::every].float()
+    factor = torch.zeros(len(batch), 2)
+    factor[:, 0] = 1  # (scale cos, scale sin): a pure translation to begin with
+    for _ in range(PIN_STEPS):
+        factor = _fit_about_origin(u, v, factor)
+    factor = factor.double()
+    chamfer = _chamfer(_turn(even, factor), goal)
+    rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
+    moved = _turn(rel, factor).numpy() + np.asarray(motor)
+    moved[:, 0] = motor  # exactly
+    placed = LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
+    score = np.nan_to_num(chamfer.numpy(), nan=np.inf)
+    order = np.argsort(score, kind="stable")
+    return Candidates(placed.subset(order), score[order])
+
+
+def _turn(points: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+    """Points (B, n, 2) scaled and turned about the origin by factor (B, 2) = s cos, s sin."""
+    c, s = factor[:, None, 0], factor[:, None, 1]
+    x, y = points[..., 0], points[..., 1]
+    return torch.stack([c * x - s * y, s * x + c * y], -1)
+
+
+def _fit_about_origin(u: torch.Tensor, v: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+    """One ICP step: the scale and rotation about the origin, as (s cos, s sin) (B, 2), that
+    best map the points u (B, k, 2) onto v (m, 2) when each point is paired with its nearest
+    on the other curve, both ways (least squares, in closed form)."""
+    d = torch.cdist(_turn(u, factor), v[None].expand(len(u), -1, -1))  # (B, k, m)
+    to_v = v[d.argmin(2)]  # (B, k, 2) partners of u's points
+    to_u = u.gather(1, d.argmin(1)[..., None].expand(-1, -1, 2))  # (B, m, 2) of v's points
+    src, dst = torch.cat([u, to_u], 1), torch.cat([to_v, v[None].expand(len(u), -1, -1)], 1)
+    dot = (src * dst).sum((1, 2))
+    cross = (src[..., 0] * dst[..., 1] - src[..., 1] * dst[..., 0]).sum(1)
+    new = torch.stack([dot, cross], 1) / (src**2).sum((1, 2)).clamp_min(1e-30)[:, None]
+    return torch.where(torch.isfinite(new).all(1, keepdim=True), new, factor)
+
+
+def _chamfer(a: torch.Tensor, b: torch.Tensor, chunk: int = 64) -> torch.Tensor:
+    """(B,) Chamfer distance (mean nearest distance both ways, summed) of a (B, n, 2) to b."""
+    parts = [torch.cdist(part, b[None].expand(len(part), -1, -1)) for part in a.split(chunk)]
+    return torch.cat([d.amin(2).mean(1) + d.amin(1).mean(1) for d in parts])
+
+
+def violation(batch: LinkageBatch, c: Constraints) -> np.ndarray:
+    """(B,) how far each linkage is from meeting the constraints, summed: lengths in the
+    batch's units, transmission angles in units of 30 degrees."""
+    total = np.zeros(len(batch))
+    for name, (_, margin) in measure_batch(batch, c, 128).items():
+        scale = 30.0 if name == "min_transmission" else 1.0
+        if name != "max_joints":
+            total += np.maximum(-np.nan_to_num(margin, nan=-1.0), 0) / scale
+    return total
+
+
+def rank(candidates: Candidates, c: Constraints) -> Candidates:
+    """Candidates sorted by Chamfer distance plus RANK_WEIGHT times their violation."""
+    if len(candidates) == 0:
+        return candidates
+    score = candidates.chamfer + RANK_WEIGHT * violation(candidates.batch, c)
+    order = np.argsort(score, kind="stable")
+    return Candidates(candidates.batch.subset(order), candidates.chamfer[order])
+
+
+def tightened(settings: RefineSettings, c: Constraints) -> RefineSettings:
+    """Refinement settings whose hard limits and penalties include the shortest link and the
+    transmission angle asked for (c in the normalised frame)."""
+    changes = {}
+    if c.min_link is not None:
+        changes["min_link"] = max(settings.min_link, LINK_FACTOR * c.min_link)
+    if c.min_transmission is not None:
+        hard, soft = (np.sin(np.radians(min(c.min_transmission + e, 89.5))) ** 2
+                      for e in EXTRA_DEGREES)  # fmt: skip
+        changes["min_margin"] = max(settings.min_margin, float(hard))
+        changes["soft_margin"] = max(settings.soft_margin, float(soft))
+    return replace(settings, **changes)
+
+
+class Barriers:
+    """Ground-box and envelope terms of the refinement objective for one batch."""
+
+    def __init__(self, batch: LinkageBatch, c: Constraints):
+        self.c = c
+        movable = torch.as_tensor(batch.valid).clone()
+        if c.motor_at is not None:
+            movable[:, 0] = False  # the pinned pivot was checked against both boxes up front
+        self.ground = movable & torch.as_tensor(batch.fixed)
+        self.every = movable
+
+    def __call__(self, positions: torch.Tensor, x: torch.Tensor, y: torch.Tensor, rows) -> tuple:
+        """(penalty (k,), ok (k,)) for candidates `rows` at positions (k, N, 2) whose joints
+        move along x, y (k, N, T)."""
+        penalty = positions.new_zeros(len(positions))
+        ok = torch.ones(len(positions), dtype=torch.bool)
+        for box, mask, xs, ys in (
+            (self.c.ground_box, self.ground, positions[..., 0], positions[..., 1]),
+            (self.c.envelope, self.every, x, y),
+        ):
+            if box is None:
+                continue
+            inside = torch.minimum(torch.minimum(xs - box.x0, box.x1 - xs),
+                                   torch.minimum(ys - box.y0, box.y1 - ys))  # fmt: skip
+            if inside.dim() == 3:
+                inside = inside.amin(2)  # the worst crank angle of each joint
+            m = mask[rows]
+            penalty = penalty + torch.where(m, torch.relu(SOFT - inside), 0).pow(2).sum(1)
+            with torch.no_grad():
+                ok &= ~(m & (inside < HARD)).any(1)
+        return penalty, ok
+
+
+def screen(batch: LinkageBatch, frame: Similarity, c: Constraints) -> tuple[np.ndarray, dict]:
+    """Which candidates (in the normalised frame) meet every constraint `c` (in the user's frame)
+    at sampled crank angles once mapped by `frame`, and each constraint's (values, margins)."""
+    positions = frame.apply(batch.positions)
+    if c.motor_at is not None:
+        positions[:, 0] = c.motor_at
+    user = LinkageBatch(positions, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
+    measured = measure_batch(user, c)
+    feasible = np.ones(len(batch), bool)
+    for _, margin in measured.values():
+        feasible &= margin >= 0
+    return feasible, measured
