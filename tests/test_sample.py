@@ -130,6 +130,6 @@ def test_shipped_model_designs_valid_linkages_for_generated_curves():
     from linkd.training_data import conditioning
 
     model = load_model()
-    curves = conditioning(torch.as_tensor(generate(6, 11).curves)).numpy()
-    out = sample(model, curves, 4, "node", seed=0)
-    assert out.valid.mean() >= 0.9
+    curves = conditioning(torch.as_tensor(generate(8, 11).curves)).numpy()
+    out = sample(model, curves, 8, "node", seed=0)
+    assert out.valid.mean() >= 0.9  # 98.8% on 300 test curves (model card)
