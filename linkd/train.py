@@ -27,7 +27,7 @@ import torch
 import torch.distributed as dist
 
 from linkd.model import LinkD, LinkDConfig, save_checkpoint
-from linkd.training_data import TrainData, augment, conditioning
+from linkd.training_data import TrainData, augment, conditioning, sub_mechanism_examples
 
 
 @dataclass
@@ -55,6 +55,7 @@ class TrainConfig:
     bf16: bool = False  # autocast matmuls to bfloat16 (CUDA)
     threads: int = 0  # torch CPU threads per process; 0 keeps torch's default
     init: str | None = None  # start from this checkpoint's weights (see `warm_start`)
+    sub_mechanisms: float = 0.0  # share of examples replaced by one of their sub-mechanisms
 
 
 PRESETS = {
@@ -64,6 +65,11 @@ PRESETS = {
     "cpu-guided": TrainConfig(
         model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
         max_steps=6000, lr=5e-4, warmup=200, eval_every=2000,
+    ),
+    # Continues a `cpu-guided` run (--init) with half the examples replaced by sub-mechanisms.
+    "cpu-sub": TrainConfig(
+        model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
+        max_steps=3000, lr=3e-4, warmup=100, eval_every=1500, sub_mechanisms=0.5,
     ),
     "cuda": TrainConfig(
         model=LinkDConfig(
@@ -187,9 +193,10 @@ def train(
         generator = torch.Generator().manual_seed(step_seed(c, step, rank))
         torch.manual_seed(step_seed(c, step, rank))
         length = min(int(data.n_nodes[index].max()) + 1, data.graphs.shape[1])
-        graphs, curves = augment(
-            data.graphs[index, :length], data.curves[index], generator, c.reflect, c.rotate
-        )
+        graphs, curves = data.graphs[index, :length], data.curves[index]
+        if c.sub_mechanisms > 0:
+            graphs, curves = sub_mechanism_examples(graphs, curves, generator, c.sub_mechanisms)
+        graphs, curves = augment(graphs, curves, generator, c.reflect, c.rotate)
         curves = conditioning(curves, generator)
         with torch.autocast(device.split(":")[0], torch.bfloat16, enabled=c.bf16):
             loss, parts = net(graphs.to(device), curves.to(device), c.draws)

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from linkd.curves import curve_moments
@@ -105,3 +106,70 @@ def augment(graphs, curves, generator, reflect: float, rotate: float):
     graphs = graphs.clone()
     graphs[..., XY] = torch.where(valid, xy / shrink[:, None, None], 0.0)
     return graphs, curves @ m.transpose(1, 2)
+
+
+# ---------------------------------------------------------------------------------------------
+# Sub-mechanisms as further examples
+
+
+def sub_mechanism_examples(
+    graphs: torch.Tensor, curves: torch.Tensor, generator: torch.Generator, share: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Replace a `share` of the examples by one of their own sub-mechanisms.
+
+    Every moving joint of a dyadic linkage traces a curve of its own, and the joints it hangs
+    on form a smaller valid linkage that ends with it (parents come first, so it is last). A
+    graph whose intermediate joint traces a genuine coupler curve (not a circle or arc) gives
+    the example (that sub-mechanism, that joint's path), in its own curve's frame: the design
+    pipeline offers exactly these to the user, and they teach the model to stop when the last
+    joint traces the curve. graphs (B, 20, 24) in their curve's frame, curves (B, T, 2).
+    """
+    from linkd.batch import LinkageBatch
+    from linkd.generator import circle_residual
+    from linkd.graph import ADJ, FEATURES, TYPE
+    from linkd.validator import validate
+
+    batch = LinkageBatch.from_graphs(graphs.numpy())
+    result = validate(batch, keep_motion=True)
+    paths = np.asarray(result.motion.paths, dtype=np.float64)  # (B, N, T, 2)
+    b, n = batch.valid.shape
+    centred = paths - paths.mean(2, keepdims=True)
+    rms = np.sqrt((centred**2).sum(-1).mean(-1))  # (B, N)
+    unit = centred / np.maximum(rms, 1e-12)[..., None, None]
+    index = np.arange(n)
+    joint = (batch.valid & ~batch.fixed & (index >= 2) & (index < batch.end_effector[:, None])
+             & result.valid[:, None] & (rms > 1e-3))  # fmt: skip
+    rows, cols = np.nonzero(joint)
+    genuine = circle_residual(unit[rows, cols]) >= 0.01
+    joint[rows[~genuine], cols[~genuine]] = False
+    score = torch.rand((b, n), generator=generator).numpy() * joint
+    pick = (torch.rand(b, generator=generator).numpy() < share) & joint.any(1)
+    rows, chosen = np.flatnonzero(pick), score.argmax(1)[pick]
+    if len(rows) == 0:
+        return graphs, curves
+    parents = np.tril(batch.adjacency[rows], -1)
+    needed = (index[None] == chosen[:, None]) | (index[None] < 2)
+    for _ in range(n):  # each pass adds the parents of what is needed
+        needed |= (parents & needed[:, :, None]).any(1)
+    order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
+    valid = np.take_along_axis(needed, order, 1)
+    adjacency = np.take_along_axis(batch.adjacency[rows], order[:, :, None], 1)
+    adjacency = np.take_along_axis(adjacency, order[:, None, :], 2) & valid[:, :, None]
+    sub = torch.full((len(rows), n, FEATURES), -1.0)
+    sub[..., VALID] = torch.as_tensor(valid, dtype=torch.float32)
+    fixed = np.take_along_axis(batch.fixed[rows], order, 1)
+    sub[..., TYPE] = torch.as_tensor(np.where(valid, fixed, -1), dtype=torch.float32)
+    xy = np.take_along_axis(batch.positions[rows], order[:, :, None], 1)
+    sub[..., XY] = torch.as_tensor(np.where(valid[..., None], xy, 0), dtype=torch.float32)
+    lower = np.tril(np.ones((n, n), bool), -1) & valid[:, :, None]
+    links = np.full((len(rows), n, FEATURES - ADJ.start), -1.0)
+    links[..., :n] = np.where(lower, adjacency, -1)
+    sub[..., ADJ] = torch.as_tensor(links, dtype=torch.float32)
+    path = paths[rows, chosen]
+    centre = torch.as_tensor(path.mean(1), dtype=torch.float32)
+    scale = torch.as_tensor(rms[rows, chosen], dtype=torch.float32)
+    graphs, curves = graphs.clone(), curves.clone()
+    graphs[torch.as_tensor(rows)] = curve_frame(sub, centre, scale)
+    curves[torch.as_tensor(rows)] = ((torch.as_tensor(path, dtype=torch.float32) - centre[:, None])
+                                     / scale[:, None, None])  # fmt: skip
+    return graphs, curves

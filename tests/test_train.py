@@ -12,6 +12,7 @@ import torch.multiprocessing as mp
 from linkd.batch import LinkageBatch
 from linkd.curves import chamfer_batch, curve_moments
 from linkd.generator import generate
+from linkd.graph import VALID
 from linkd.model import LinkD, load_checkpoint
 from linkd.train import PRESETS, epoch_batches, lr_at, train
 from linkd.training_data import (
@@ -193,3 +194,23 @@ def test_warm_start_adds_cross_attention_without_changing_the_model(data, tmp_pa
     assert losses[0] == pytest.approx(losses[1], rel=1e-6)
     with pytest.raises(ValueError, match="is"):
         warm_start(LinkD(replace(PRESETS["tiny"].model, dim=48)), tmp_path / "plain.pt")
+
+
+def test_sub_mechanism_examples_trace_their_curves(data):
+    from linkd.evaluate import design_chamfer
+    from linkd.training_data import sub_mechanism_examples
+
+    graphs, curves = data.graphs[:32, :19], data.curves[:32]  # cut like a training batch
+    g = torch.Generator().manual_seed(0)
+    new_graphs, new_curves = sub_mechanism_examples(graphs, curves, g, share=1.0)
+    changed = (new_curves - curves).abs().amax((1, 2)) > 1e-6
+    assert changed.float().mean() > 0.5  # most graphs have an intermediate coupler joint
+    n_old = (graphs[..., VALID] > 0.5).sum(1)
+    n_new = (new_graphs[..., VALID] > 0.5).sum(1)
+    assert torch.all(n_new[changed] < n_old[changed]) and torch.equal(new_graphs[~changed],
+                                                                    graphs[~changed])
+    # each example is a valid linkage whose last joint traces its (normalised) curve
+    distance = design_chamfer(new_graphs.numpy(), new_curves.numpy())
+    assert np.all(distance < 1e-3)
+    kept = sub_mechanism_examples(graphs, curves, g, share=0.0)
+    assert torch.equal(kept[0], graphs) and torch.equal(kept[1], curves)
