@@ -126,7 +126,7 @@ def stroke_error(stroke: np.ndarray, target: np.ndarray, points: int = 2000) -> 
 def timing_error(at_times: np.ndarray, rows: np.ndarray) -> float:
     """Mean distance between each row and the end effector at its time (same count and order),
     in the target's normalised frame."""
-    centre, radius = target_frame(rows)
+    radius = target_frame(rows)[1]
     return float(np.linalg.norm(np.asarray(at_times) - rows, axis=1).mean() / radius)
 
 

@@ -10,13 +10,14 @@ from pathlib import Path
 
 from linkd.errors import InputError
 from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
+from linkd.paths import PATH_KINDS
 
 STRATEGIES = ("node", "graph", "oneshot")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("design", help="design a linkage whose end effector traces a curve")
-    p.add_argument("curve", help="target curve: CSV of x,y points along a closed path")
+    p.add_argument("curve", help="target curve: CSV of x,y points along a closed or open path")
     p.add_argument("--export", default="mjcf,stl", help="formats, comma separated: mjcf, stl")
     p.add_argument("--out", help="output folder (default: <curve>-design, a new name)")
     p.add_argument("--force", action="store_true", help="replace OUT even if it is not an output")
@@ -30,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--top", type=int, default=0, help="also write alternative topologies")
     p.add_argument("--time-budget", type=float, default=30.0, help="seconds for the whole run")
     p.add_argument("--model", help="LinkD checkpoint (default: the one shipped with linkd)")
+    # open paths and timing
+    p.add_argument("--path", default="auto", help="the curve is a closed loop or an open stroke: "
+                   "auto (from the gap between its ends), closed or open")  # fmt: skip
+    p.add_argument("--timed", action="store_true",
+                   help="the rows are equally spaced in time at constant crank speed")  # fmt: skip
     p.set_defaults(run=run)
 
 
@@ -53,6 +59,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--{name} must be at least {1 if name == 'candidates' else 0}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget must be positive, got {args.time_budget}")
+    if args.path not in PATH_KINDS:
+        raise InputError(f"--path: expected one of {', '.join(PATH_KINDS)}, got {args.path!r}")
     if args.out:
         out = Path(args.out)
     else:
@@ -72,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
         every_joint=not single,
         attempts=1 if single else DesignOptions.attempts,
         model=args.model,
+        path=args.path,
+        timed=args.timed,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:
@@ -81,6 +91,13 @@ def run(args: argparse.Namespace) -> int:
     m = d.measures
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers, verified in MuJoCo")  # fmt: skip
+    path = r["curve"]["path"] + (" (chosen by --path auto)" if args.path == "auto" else "")
+    stroke = ""
+    if m.crank_range_deg is not None:
+        a, b = m.crank_range_deg
+        stroke = f", traced while the crank turns from {a:.1f} to {b:.1f} deg"
+    timing = "" if m.timing_error is None else f"; timing error {m.timing_error:.4f} (timed)"
+    print(f"  {path} path{stroke}{timing}")
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip

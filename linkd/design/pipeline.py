@@ -28,7 +28,7 @@ import numpy as np
 
 from linkd import __version__
 from linkd.batch import LinkageBatch
-from linkd.curves import normalise, read_curve, resample
+from linkd.curves import read_path
 from linkd.outdir import staged_output
 
 from .output import Delivered, deliver, finish, summary
@@ -36,6 +36,8 @@ from .propose import Candidates, Proposer, model_proposer, place, propose, sub_m
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
+from .stroke import Goal, make_goal, place_stroke
+from .stroke_refine import refine_stroke
 
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
@@ -59,6 +61,9 @@ class DesignOptions:
     attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
+    # open paths and timing (issue 10)
+    path: str = "auto"  # "auto", "closed" or "open": what the curve is (see linkd.paths)
+    timed: bool = False  # rows equally spaced in time at constant crank speed
 
 
 class NoDesign(Exception):
@@ -90,15 +95,16 @@ def design(
     start = time.monotonic()
     stages = Stages(show)
     with stages.stage("read", "reading the curve") as note:
-        points = read_curve(curve_path)
-        target, frame = normalise(resample(points, N_POINTS))
-        note(f"{len(points)} points from {Path(curve_path).name}")
+        points, closed = read_path(curve_path, o.path)
+        goal, frame = make_goal(points, closed, o.timed, N_POINTS)
+        kind = ("closed" if closed else "open") + (", timed" if o.timed else "")
+        note(f"{len(points)} points from {Path(curve_path).name}, {kind} path")
     search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
     try:
         with single_thread(), staged_output(out, force) as stage:
-            candidates = _search(target, o, proposer, stages, start, search)
+            candidates = _search(goal, o, proposer, stages, start, search)
             found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source)
             report = {
                 "format": "linkd-design-report/1",
@@ -106,6 +112,9 @@ def design(
                     "file": str(Path(curve_path).resolve()),
                     "points": len(points),
                     "units": o.units,
+                    "path": "closed" if closed else "open",
+                    "path_option": o.path,
+                    "timed": o.timed,
                 },
                 "design": summary(found),
                 "search": search,
@@ -125,14 +134,17 @@ def design(
 
 
 def _search(
-    target: np.ndarray,
+    goal: Goal,
     o: DesignOptions,
     proposer: Proposer | None,
     stages: Stages,
     start: float,
     search: dict,
 ) -> Candidates:
-    """Propose, place and refine; each candidate's `chamfer` is its latest curve error."""
+    """Propose, place and refine; each candidate's `chamfer` is its latest curve error (on an
+    open or timed target: its stroke's Chamfer distance, or its timing error)."""
+    stroke = not goal.closed or goal.timed
+    target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         if proposer is None:
             from linkd.sample import load_model
@@ -145,7 +157,7 @@ def _search(
         batch = LinkageBatch.from_graphs(graphs)
         if o.every_joint:
             batch = sub_mechanisms(batch, target, o.placed)
-        candidates = place(batch, target)
+        candidates = place_stroke(batch, goal) if stroke else place(batch, target)
         search["proposed"], search["valid"] = len(graphs), len(candidates)
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
         note(f"{len(candidates)} valid{best}")
@@ -158,7 +170,13 @@ def _search(
                                      o.refine_count, o.per_topology))  # fmt: skip
         deadline = start + o.time_budget - DELIVERY_RESERVE
         with stages.stage("refine", f"refining {len(rows)} designs") as note:
-            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline)
+            subset = candidates.batch.subset(rows)
+            if stroke:
+                result, ranges = refine_stroke(subset, candidates.ranges[rows], goal,
+                                               o.refine_settings, deadline)  # fmt: skip
+                candidates.ranges[rows[result.ok]] = ranges[result.ok]
+            else:
+                result = refine(subset, target, o.refine_settings, deadline)
             ok = result.ok
             candidates.batch.positions[rows[ok]] = result.positions[ok]
             score[rows[ok]] = result.chamfer[ok]
@@ -168,6 +186,8 @@ def _search(
             search["budget_cut_refinement"] = result.iterations < o.refine_settings.iterations
             note(f"{result.iterations} iterations, best Chamfer {np.nanmin(score):.4f}")
     candidates.chamfer = score
+    if goal.closed:  # a closed timed path: its phase is measured again on delivery
+        candidates.ranges = None
     return candidates
 
 
@@ -187,8 +207,8 @@ def _deliver(
         found, tried = None, 0
         for row in order[: o.attempts]:
             tried += 1
-            mech = to_mechanism(batch, int(row), frame, o.units)
-            found = deliver(mech, points, stage, o.formats, source)
+            mech = to_mechanism(batch, int(row), frame, o.units, _range(candidates, row))
+            found = deliver(mech, points, stage, o.formats, source, o.timed)
             if found:
                 break
         if found is None:
@@ -217,8 +237,9 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
     for row in rows[: o.attempts * o.top]:
         folder = stage / "alternatives" / str(len(listed) + 1)
         folder.mkdir(parents=True, exist_ok=True)
-        mech = to_mechanism(batch, row, frame, o.units)
-        alt = deliver(mech, points, folder, o.formats, {**source, "alternative": len(listed) + 1})
+        mech = to_mechanism(batch, row, frame, o.units, _range(candidates, row))
+        alt = deliver(mech, points, folder, o.formats, {**source, "alternative": len(listed) + 1},
+                      o.timed)  # fmt: skip
         if alt is None:
             continue
         finish(alt, points, o.formats, {"design": summary(alt)})
@@ -230,6 +251,14 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if folder.exists() and not any(folder.iterdir()):
             folder.rmdir()
     return listed
+
+
+def _range(candidates: Candidates, row: int) -> tuple[float, float] | None:
+    """The crank range of a candidate on an open path (None on a closed one)."""
+    if candidates.ranges is None:
+        return None
+    a, b = candidates.ranges[int(row)]
+    return float(a), float(b)
 
 
 def _timings(stages: Stages, start: float) -> dict:
