@@ -51,6 +51,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
     d.add_argument("--json", help="also write the figures to this JSON file")
+    d.add_argument("--path", default="auto", choices=("auto", "closed", "open"),
+                   help="what the curves are (auto: an index.csv's closed column, else the gap "
+                   "between the ends)")  # fmt: skip
+    d.add_argument("--only", choices=("open", "closed"), help="only the open or closed curves")
+    d.add_argument("--timed", action="store_true", help="rows equally spaced in time")
     d.set_defaults(run=design)
 
 

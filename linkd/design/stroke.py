@@ -85,24 +85,31 @@ def place_stroke(batch: LinkageBatch, goal: Goal) -> Candidates:
     result = validate(batch, PATH_ANGLES, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
-    batch, paths = batch.subset(keep), torch.as_tensor(paths[keep])
+    batch, paths = batch.subset(keep), torch.as_tensor(paths[keep], dtype=torch.float32)
     if len(keep) == 0:
         return Candidates(batch, np.zeros(0), np.zeros((0, 2)))
-    target = torch.as_tensor(goal.samples(MATCH_POINTS))
-    found = [_search(paths[c], torch.as_tensor(batch.positions[c.start:c.stop]), target, goal)
-             for c in _chunks(len(keep))]  # fmt: skip
+    target = torch.as_tensor(goal.samples(MATCH_POINTS), dtype=torch.float32)
+    joints = torch.as_tensor(batch.positions, dtype=torch.float32)
+    found = [_search(paths[c], joints[c], target, goal) for c in _chunks(len(keep))]
     scale, turn, shift, ranges = (torch.cat(parts) for parts in zip(*found))
+    scale, ranges = scale.double(), ranges.double()
+    turn, shift = turn.to(torch.complex128), shift.to(torch.complex128)
     positions = torch.as_tensor(batch.positions)
     flip = ranges[:, 2] > 0
     z = torch.complex(positions[..., 0], torch.where(flip[:, None], -1, 1) * positions[..., 1])
     placed = scale[:, None] * turn[:, None] * z + shift[:, None]
     batch.positions = torch.stack([placed.real, placed.imag], -1).numpy()
-    a = ranges[:, 0].numpy() % (2 * np.pi)
-    spans = ranges[:, 1].numpy()
-    crank = np.stack([a, a + spans], 1)
+    crank = crank_ranges(ranges[:, 0].numpy(), ranges[:, 1].numpy())
     score = stroke_scores(batch, crank, goal)
     order = np.argsort(score, kind="stable")
     return Candidates(batch.subset(order), score[order], crank[order])
+
+
+def crank_ranges(start: np.ndarray, span: np.ndarray) -> np.ndarray:
+    """(K, 2) crank ranges [a, a + span] with each start a wrapped into [0, 2 pi)."""
+    a = np.mod(start, 2 * np.pi)
+    a = np.where(a < 2 * np.pi, a, 0.0)  # rounding can give 2 pi itself
+    return np.stack([a, a + np.minimum(span, 2 * np.pi)], 1)
 
 
 def _chunks(n: int) -> list[slice]:
@@ -163,17 +170,22 @@ def _fit(paths, joints, z, begin, length, fraction, timed: bool) -> tuple:
         w = points.conj().flip(-1) if mirrored else points
         centre = w.mean(-1, keepdim=True)
         w = w - centre
-        power = (w.abs() ** 2).sum(-1).clamp_min(1e-18)
+        power = _square(w).sum(-1).clamp_min(1e-18)
         cross = (w.conj() * z).sum(-1)
-        fit = ((z.abs() ** 2).sum() - cross.abs() ** 2 / power).clamp_min(0) / m
+        fit = (_square(z).sum() - _square(cross) / power).clamp_min(0) / m
         gain = cross / power
         # How far the placed joints reach: |gain| times the joints' distance from the centre.
         zj = torch.complex(joints[..., 0], (-1 if mirrored else 1) * joints[..., 1])
-        reach = (zj[:, None, :] - centre).abs().amax(-1) * gain.abs()
+        reach = (_square(zj[:, None, :] - centre).amax(-1) * _square(gain)).sqrt()
         scores.append(fit.sqrt() + torch.relu(reach - MAX_REACH))
         gains.append(gain)
         centres.append(centre[..., 0])
     return torch.stack(scores, 1), torch.stack(gains, 1), torch.stack(centres, 1)
+
+
+def _square(z: torch.Tensor) -> torch.Tensor:
+    """|z|^2 of complex numbers, without the square root of abs()."""
+    return z.real**2 + z.imag**2
 
 
 def _arc_positions(paths: torch.Tensor, begin: torch.Tensor, length: torch.Tensor,

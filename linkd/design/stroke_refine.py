@@ -26,7 +26,7 @@ from linkd.batch import LinkageBatch
 from linkd.kinematics import trace
 
 from .refine import Objective, RefineResult, RefineSettings, Terms, refine
-from .stroke import Goal
+from .stroke import Goal, crank_ranges
 
 STROKE_ANGLES = 128  # crank angles along an untimed stroke
 END_WEIGHT = 0.5  # weight of the ends' distance beside the Chamfer distance
@@ -50,12 +50,8 @@ def refine_stroke(
     riding = LinkageBatch(np.concatenate([batch.positions, extra], 1), batch.fixed, batch.valid,
                           batch.adjacency, batch.end_effector)  # fmt: skip
     result = refine(riding, goal, s, deadline, StrokeObjective)
-    a, span = result.positions[:, -1, 0], result.positions[:, -1, 1]
-    start = a % (2 * np.pi)
-    positions = result.positions[:, :-1]
-    return RefineResult(positions, result.chamfer, result.iterations), np.stack(
-        [start, start + span], 1
-    )
+    ranges = crank_ranges(result.positions[:, -1, 0], result.positions[:, -1, 1])
+    return RefineResult(result.positions[:, :-1], result.chamfer, result.iterations), ranges
 
 
 class StrokeObjective(Objective):
