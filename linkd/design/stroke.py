@@ -31,6 +31,7 @@ PATH_ANGLES = 256  # crank angles each candidate's path is sampled at for the se
 STARTS = 32  # sub-arc starts per revolution (open strokes)
 PHASES = 64  # phases per revolution (closed timed targets)
 SPANS = tuple(np.linspace(0.1, 1.0, 13))  # sub-arc spans, fractions of a revolution
+REFINE_STEPS, REFINE_LEVELS = 7, 2  # finer grids: steps per side and how many
 MATCH_POINTS = 32  # points per sub-arc and target in the search
 SCORE_POINTS = 64  # points per placed stroke when ranking
 MAX_REACH = 30.0  # joints placed further than this from the target centroid are penalised
@@ -133,15 +134,17 @@ def _search(paths: torch.Tensor, joints: torch.Tensor, target: torch.Tensor, goa
     length = spans.repeat(len(starts)).to(paths.dtype).expand(B, -1)
     fraction = goal.fractions(m, paths)
     z = torch.complex(target[:, 0], target[:, 1])
-    score, _, _ = _fit(paths, joints, z, begin, length, fraction, goal.timed)
-    best = score.amin(1).argmin(1)
+    score, gain, centre = _fit(paths, joints, z, begin, length, fraction, goal.timed)
     rows = torch.arange(B)
-    nudge = torch.linspace(-0.5, 0.5, 7, dtype=paths.dtype)
+    nudge = torch.linspace(-0.5, 0.5, REFINE_STEPS, dtype=paths.dtype)
     start_step = T / (PHASES if goal.periodic else STARTS)
     span_step = 0.0 if goal.periodic else float(SPANS[1] - SPANS[0]) * T
-    begin = (begin[rows, best, None] + start_step * nudge.repeat_interleave(7)[None])
-    length = (length[rows, best, None] + span_step * nudge.repeat(7)[None]).clamp(1, T)
-    score, gain, centre = _fit(paths, joints, z, begin, length, fraction, goal.timed)
+    for _ in range(REFINE_LEVELS):  # finer grids round the best sub-arc so far
+        best = score.amin(1).argmin(1)
+        begin = begin[rows, best, None] + start_step * nudge.repeat_interleave(len(nudge))
+        length = (length[rows, best, None] + span_step * nudge.repeat(len(nudge))).clamp(1, T)
+        score, gain, centre = _fit(paths, joints, z, begin, length, fraction, goal.timed)
+        start_step, span_step = (step / (REFINE_STEPS - 1) for step in (start_step, span_step))
     best = score.reshape(B, -1).argmin(1)
     mirrored, arc = best // begin.shape[1], best % begin.shape[1]
     gain, centre = gain[rows, mirrored, arc], centre[rows, mirrored, arc]
