@@ -61,7 +61,7 @@ def dataset_curves(root: str, count: int, folder: Path) -> list[Path]:
 
 
 def indexed_kind(file: Path) -> str | None:
-    """"open" or "closed" from the `closed` column of an index.csv in the curve's folder or the
+    """Open or closed, from the `closed` column of an index.csv in the curve's folder or the
     one above it (rows named like `alphabet/C`), None when there is none."""
     for root in (file.parent, file.parent.parent):
         index = root / "index.csv"
@@ -202,7 +202,7 @@ def summary_table(total: dict) -> str:
 
 
 def _kind(file: Path, kind: str) -> str:
-    """"open" or "closed": as given, or as `linkd.paths` reads the file."""
+    """Open or closed: as given, or as `linkd.paths` reads the file."""
     return kind if kind != "auto" else ("closed" if read_path(file, "auto")[1] else "open")
 
 

@@ -113,7 +113,10 @@ def _phase(
 
 
 def _refine(
-    batch: LinkageBatch, target: np.ndarray, s: RefineSettings, deadline: float | None,
+    batch: LinkageBatch,
+    target: np.ndarray,
+    s: RefineSettings,
+    deadline: float | None,
     objective_type: type[Objective],
 ) -> RefineResult:
     copies = len(s.ordered_weights)

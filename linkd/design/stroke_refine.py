@@ -32,7 +32,7 @@ STROKE_ANGLES = 128  # crank angles along an untimed stroke
 END_WEIGHT = 0.5  # weight of the ends' distance beside the Chamfer distance
 CHAMFER_WEIGHT = 0.2  # weight of the Chamfer distance beside the timing error
 MIN_SPAN = 0.2  # radians: a stroke needs some of the revolution
-REACH = 12.0  # joints beyond this distance of the target's centroid are penalised (strokes
+REACH = 15.0  # joints beyond this distance of the target's centroid are penalised (strokes
 # are short next to the machines that trace them)
 
 
