@@ -13,7 +13,7 @@ import pytest
 from linkd import classic
 from linkd.cli import main
 from linkd.curves import resample, write_curve
-from linkd.design.bench import run_bench, stroke_deviation
+from linkd.design.bench import run_bench
 from linkd.design.pipeline import DesignOptions, design
 from linkd.design.refine import RefineSettings
 from linkd.design.select import end_effector_path, timing_of
