@@ -32,7 +32,14 @@ _EXACT = "donot_use_mm_for_euclid_dist"  # torch.cdist: differences, not a matri
 
 
 def read_curve(path: str | Path) -> np.ndarray:
-    """Read a closed target curve from `path` as (M, 2) float64 points, in file order.
+    """Read a closed target curve from `path` as (M, 2) float64 points, in file order
+    (`read_path` with `kind="closed"`)."""
+    return read_path(path, "closed")[0]
+
+
+def read_path(path: str | Path, kind: str = "auto") -> tuple[np.ndarray, bool]:
+    """Read a target path from `path`: its (M, 2) float64 points, in file order, and whether it
+    is closed. `kind` is "closed", "open" or "auto" (`linkd.paths.is_closed` decides).
 
     The separator (semicolon, comma, tab or whitespace) is the one that parses the most rows of
     this file (on a tie, the one that splits the most rows, then the first in SEPARATORS). Except
@@ -54,7 +61,9 @@ def read_curve(path: str | Path) -> np.ndarray:
             points[k] = _parse_row(text, sep)
         except ValueError as exc:
             raise InputError(f"{name}: row {row}: {exc}") from None
-    return _checked_closed_path(name, points)
+    from linkd.paths import checked_path
+
+    return checked_path(name, points, kind)
 
 
 def write_curve(path: str | Path, points: np.ndarray, comment: str | None = None) -> None:
@@ -128,20 +137,6 @@ def _number(field: str, decimal_comma: bool) -> float | None:
 
 def _quote(field: str, limit: int = 24) -> str:
     return repr(field if len(field) <= limit else field[:limit] + "...")
-
-
-def _checked_closed_path(name: str, points: np.ndarray) -> np.ndarray:
-    if len(points) > 1 and np.array_equal(points[0], points[-1]):
-        points = points[:-1]
-    distinct = len(np.unique(points, axis=0))
-    if distinct == 1 and len(points) > 1:
-        raise InputError(f"{name}: all points are equal")
-    if distinct < MIN_POINTS:
-        raise InputError(f"{name}: {distinct} distinct points, need at least {MIN_POINTS}")
-    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
-    if spread[1] <= COLLINEAR_TOL * spread[0]:
-        raise InputError(f"{name}: all points lie on one line")
-    return points
 
 
 # Resampling and normalisation

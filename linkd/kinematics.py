@@ -117,9 +117,12 @@ def assembly_geometry(positions: Any, plan: Plan, ops: SimpleNamespace) -> tuple
 
 
 def crank_path(pivot: Any, tip: Any, angles: Any, ops: SimpleNamespace) -> tuple:
-    """Coordinates (B, T) of a crank tip turned counter-clockwise about its pivot."""
+    """Coordinates (B, T) of a crank tip turned counter-clockwise about its pivot, by angles
+    (T,) shared by all or (B, T) of each."""
     vx, vy = (tip[:, 0] - pivot[:, 0])[:, None], (tip[:, 1] - pivot[:, 1])[:, None]
-    c, s = ops.cos(angles)[None], ops.sin(angles)[None]
+    c, s = ops.cos(angles), ops.sin(angles)
+    if len(angles.shape) == 1:
+        c, s = c[None], s[None]
     return pivot[:, 0:1] + c * vx - s * vy, pivot[:, 1:2] + s * vx + c * vy
 
 
@@ -159,7 +162,8 @@ def trace(
 
     positions: (B, N, 2) assembly pose, node 0 the motor pivot and node 1 the crank tip.
     plan: the batch's solve order (`topology.assembly_plan`).
-    angles: a count T (angles 2*pi*k/T) or explicit crank angles relative to the assembly pose.
+    angles: a count T (angles 2*pi*k/T) or explicit crank angles relative to the assembly pose,
+        (T,) for all or (B, T), one row per mechanism.
     full: also keep every dyad's transmission at every angle (for smooth penalties).
     compiled: run each step as one torch.compile'd kernel (torch tensors; ignored with `full`
         or for positions that require gradients).
@@ -170,7 +174,7 @@ def trace(
         angles = ops.angles(angles, positions)
     else:
         angles = ops.asarray(angles, positions)
-    t = angles.shape[0]
+    t = angles.shape[-1]
     # Slot n is scratch: unused plan steps write there (a copy of the crank tip).
     extended = ops.stack([positions[:, k] for k in [*range(n), 1]], 1)
     xs = ops.materialise(extended[:, :, 0, None], (bsz, n + 1, t))

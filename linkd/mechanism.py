@@ -34,6 +34,9 @@ class Mechanism:
     end_effector: int
     units: str = DEFAULT_UNITS
     extra: dict[str, Any] = field(default_factory=dict)  # extra JSON keys, kept on save
+    # [a, b]: the end effector traces the designed open path while the crank turns from a to b
+    # (radians from the assembly pose); None: the designed path is the whole revolution.
+    crank_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         pos = np.array(self.positions, dtype=np.float64).reshape(-1, 2)
@@ -43,6 +46,12 @@ class Mechanism:
         object.__setattr__(self, "links", tuple((int(i), int(j)) for i, j in links))
         object.__setattr__(self, "motor", (int(self.motor[0]), int(self.motor[1])))
         object.__setattr__(self, "end_effector", int(self.end_effector))
+        if self.crank_range is not None:
+            problem = crank_range_problem(self.crank_range)
+            if problem:
+                raise ValueError(f"crank_range {problem}")
+            a, b = (float(v) for v in self.crank_range)
+            object.__setattr__(self, "crank_range", (a, b))
 
     @property
     def n_nodes(self) -> int:
@@ -74,13 +83,20 @@ class Mechanism:
             "end_effector": self.end_effector,
             "units": self.units,
             "extra": self.extra,
+            "crank_range": self.crank_range,
         }
         fields.update(changes)
         return Mechanism(**fields)
 
     def transformed(self, similarity: Similarity) -> Mechanism:
-        """The same mechanism moved by a similarity (a reflection reverses its path's direction)."""
-        return self.replace(positions=similarity.apply(self.positions))
+        """The same mechanism moved by a similarity (a reflection reverses its path's direction:
+        the crank range becomes the mirrored angles, traced backwards)."""
+        moved = self.replace(positions=similarity.apply(self.positions))
+        if self.crank_range is None or not similarity.reflects:
+            return moved
+        a, b = self.crank_range
+        start = (-b) % (2 * math.pi)
+        return moved.replace(crank_range=(start, start + (b - a)))
 
     def relabelled(self, order: np.ndarray | list[int]) -> Mechanism:
         """The same mechanism with node `order[k]` becoming node k."""
@@ -108,6 +124,7 @@ class Mechanism:
             "links": [[i, j] for i, j in self.links],
             "motor": list(self.motor),
             "end_effector": self.end_effector,
+            **({"crank_range": list(self.crank_range)} if self.crank_range is not None else {}),
             **self.extra,
         }
 
@@ -180,9 +197,27 @@ class Mechanism:
         ee = data.get("end_effector")
         if not _is_index(ee, n):
             raise fail(f"'end_effector' must be a joint index in 0..{n - 1}, got {ee!r}")
-        known = {"format", "units", "nodes", "links", "motor", "end_effector"}
+        crank_range = data.get("crank_range")
+        if crank_range is not None:
+            problem = crank_range_problem(crank_range)
+            if problem:
+                raise fail(f"'crank_range' {problem}")
+        known = {"format", "units", "nodes", "links", "motor", "end_effector", "crank_range"}
         extra = {k: v for k, v in data.items() if k not in known}
-        return cls(np.array(positions), np.array(fixed), tuple(seen), motor, ee, units, extra)
+        return cls(np.array(positions), np.array(fixed), tuple(seen), motor, ee, units, extra,
+                   None if crank_range is None else tuple(crank_range))  # fmt: skip
+
+
+def crank_range_problem(value: Any) -> str | None:
+    """What is wrong with a crank range [a, b] (0 <= a < 2 pi, a < b <= a + 2 pi), or None."""
+    if not (isinstance(value, (list, tuple)) and len(value) == 2 and all(map(_is_number, value))):
+        return f"must be [a, b], two numbers (radians), got {value!r}"
+    a, b = (float(v) for v in value)
+    if not (math.isfinite(a) and math.isfinite(b)):
+        return f"must be finite, got {list(value)!r}"
+    if not 0 <= a < 2 * math.pi or not a < b <= a + 2 * math.pi + 1e-9:
+        return f"must have 0 <= a < 2 pi and a < b <= a + 2 pi, got {list(value)!r}"
+    return None
 
 
 def _is_number(value: Any) -> bool:

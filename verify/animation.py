@@ -242,9 +242,14 @@ def scene_commands(
     lift = max(float(part.vertices[:, 2].max()) for part in parts) if parts else 0.0
     ee = paths[mech.end_effector]
     commands.append(_line(ee[:-1], lift, 0xD62728, root.append("traced_path")))
+    stroke = mech.crank_range is not None  # an open path: draw it open, and the working stroke
     if target is not None:
         drawn_target = screen_polyline(np.asarray(target)[:, :2])
-        commands.append(_line(drawn_target, lift, 0x1F77B4, root.append("target")))
+        target_line = _line(drawn_target, lift, 0x1F77B4, root.append("target"), closed=not stroke)
+        commands.append(target_line)
+    if stroke:
+        working = joint_paths(mech, np.linspace(*mech.crank_range, FRAMES))[mech.end_effector]
+        commands.append(_line(working, lift, 0x2CA02C, root.append("working_stroke"), False))
     commands.append(SetAnimation(animation, play=True, repetitions=float("inf")))
     return _stable_ids([command.lower() for command in commands])
 
@@ -275,13 +280,14 @@ def _stable_ids(lowered: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return renamed(lowered)
 
 
-def _line(points: np.ndarray, z: float, colour: int, path: Any) -> Any:
-    """A closed polyline command."""
+def _line(points: np.ndarray, z: float, colour: int, path: Any, closed: bool = True) -> Any:
+    """A polyline command, closed unless asked otherwise."""
     from meshcat import geometry as g
     from meshcat.commands import SetObject
 
     xyz = np.column_stack([points, np.full(len(points), z)]).astype(np.float32)
-    line = g.LineLoop(g.PointsGeometry(xyz.T), g.LineBasicMaterial(color=colour, linewidth=2))
+    kind = g.LineLoop if closed else g.Line
+    line = kind(g.PointsGeometry(xyz.T), g.LineBasicMaterial(color=colour, linewidth=2))
     return SetObject(line, path=path)
 
 

@@ -28,10 +28,19 @@ def write_curve_plot(mech: Mechanism, path: str | Path, target: np.ndarray | Non
     traced = paths[mech.end_effector]
     fig = Figure(figsize=(6, 6), dpi=120)
     ax = fig.add_subplot()
+    stroke = mech.crank_range is not None  # an open path: the working stroke is part of it
     if target is not None:
-        closed = np.vstack([target[:, :2], target[:1, :2]])
-        ax.plot(*closed.T, color="tab:blue", lw=2.5, alpha=0.6, label="target curve")
-    ax.plot(*np.vstack([traced, traced[:1]]).T, color="tab:red", lw=1.2, label="traced path")
+        drawn = target[:, :2] if stroke else np.vstack([target[:, :2], target[:1, :2]])
+        ax.plot(*drawn.T, color="tab:blue", lw=2.5, alpha=0.6, label="target curve")
+    label = "traced path (whole revolution)" if stroke else "traced path"
+    ax.plot(*np.vstack([traced, traced[:1]]).T, color="tab:red", lw=1.2, label=label)
+    if stroke:
+        a, b = mech.crank_range
+        working = joint_paths(mech, np.linspace(a, b, ANGLES))[mech.end_effector]
+        degrees = f"{np.degrees(a):.0f} to {np.degrees(b):.0f} deg"
+        ax.plot(*working.T, color="tab:green", lw=2.2, label=f"working stroke, crank {degrees}")
+        ax.plot(*working[0], "o", color="tab:green", ms=7, label="stroke start")
+        ax.plot(*working[-1], "s", color="tab:green", ms=7, label="stroke end")
     for joints in rigid_parts(mech)[1:]:
         if len(joints) > 2:  # a plate: shade its outline
             corners = mech.positions[list(joints)]

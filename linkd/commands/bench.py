@@ -59,6 +59,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="curves as given; placed in a user's frame (mm); or placed there "
                         "with designer's constraints around each, with or without the motor "
                         "point (linkd.design.bench)")  # fmt: skip
+    d.add_argument("--path", default="auto", choices=("auto", "closed", "open"),
+                   help="what the curves are (auto: an index.csv's closed column, else the gap "
+                   "between the ends)")  # fmt: skip
+    d.add_argument("--only", choices=("open", "closed"), help="only the open or closed curves")
+    d.add_argument("--timed", action="store_true", help="rows equally spaced in time")
     d.set_defaults(run=design)
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from linkd import constraints
 from linkd.errors import InputError
 from linkd.mechanism import DEFAULT_UNITS, UNITS_IN_METRES
+from linkd.paths import PATH_KINDS
 
 STRATEGIES = ("node", "graph", "oneshot")
 PROPOSERS = ("model", "random")
@@ -51,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("design", help="design a linkage whose end effector traces a curve",
                        description=DESCRIPTION, epilog=EPILOG)  # fmt: skip
     p.add_argument("curve", metavar="CURVE.csv",
-                   help="target curve: x,y points along the path (see below)")  # fmt: skip
+                   help="target curve: x,y points along a path (see below)")  # fmt: skip
     p.add_argument("--export", default="mjcf,stl", metavar="FORMATS",
                    help="comma separated: mjcf (MuJoCo model), stl (part meshes)")  # fmt: skip
     p.add_argument("--out", help="output folder (default: <curve>-design, a name not yet taken)")
@@ -81,6 +82,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="where candidates come from: model (LinkD) or random (linkd's "
                    "generator, blind to the curve: the baseline)")  # fmt: skip
     constraints.add_arguments(p)
+    # open paths and timing
+    p.add_argument("--path", default="auto", help="the curve is a closed loop or an open stroke: "
+                   "auto (from the gap between its ends), closed or open")  # fmt: skip
+    p.add_argument("--timed", action="store_true",
+                   help="the rows are equally spaced in time at constant crank speed")  # fmt: skip
     p.set_defaults(run=run)
 
 
@@ -109,6 +115,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.time_budget > 0:
         raise InputError(f"--time-budget must be positive, got {args.time_budget}")
     _check_size(args.curve, args.units)
+    if args.path not in PATH_KINDS:
+        raise InputError(f"--path: expected one of {', '.join(PATH_KINDS)}, got {args.path!r}")
     if args.out:
         out = Path(args.out)
     else:
@@ -131,6 +139,8 @@ def run(args: argparse.Namespace) -> int:
         model=args.model,
         proposer=args.proposer,
         constraints=limits,
+        path=args.path,
+        timed=args.timed,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:
@@ -140,6 +150,13 @@ def run(args: argparse.Namespace) -> int:
     m = d.measures
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers, verified in MuJoCo")  # fmt: skip
+    path = r["curve"]["path"] + (" (chosen by --path auto)" if args.path == "auto" else "")
+    stroke = ""
+    if m.crank_range_deg is not None:
+        a, b = m.crank_range_deg
+        stroke = f", traced while the crank turns from {a:.1f} to {b:.1f} deg"
+    timing = "" if m.timing_error is None else f"; timing error {m.timing_error:.4f} (timed)"
+    print(f"  {path} path{stroke}{timing}")
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip

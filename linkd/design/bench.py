@@ -10,10 +10,15 @@ a temporary folder and thrown away.
 USER_OFFSET); `--setup constrained` also gives it a designer's constraints built around it
 (`constraint_setup`), and checks each delivered design against them again; `--setup
 no-motor` gives the same constraints but the motor point (an ablation: what pinning costs).
+Open paths (from the `closed` column of an index.csv beside the curves, or `--path`) are
+measured on the working stroke: its Chamfer distance to the target, and its worst deviation
+from the target polyline as a fraction of the target's length. With `--timed` the timing error
+is reported too.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import tempfile
 import time
@@ -21,13 +26,15 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from linkd.constraints import Box, Constraints, check
-from linkd.curves import read_curve, write_curve
+from linkd.curves import read_curve, read_path, resample, write_curve
 from linkd.errors import InputError
 
 from .pipeline import DesignOptions, design
 from .propose import Proposer
+from .select import end_effector_path
 
 SETUPS = ("plain", "user", "constrained", "no-motor")
 USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])
@@ -87,14 +94,41 @@ def dataset_curves(root: str, count: int, folder: Path) -> list[Path]:
     return files
 
 
+def indexed_kind(file: Path) -> str | None:
+    """Open or closed, from the `closed` column of an index.csv in the curve's folder or the
+    one above it (rows named like `alphabet/C`), None when there is none."""
+    for root in (file.parent, file.parent.parent):
+        index = root / "index.csv"
+        if not index.is_file():
+            continue
+        name = file.relative_to(root).with_suffix("").as_posix()
+        with index.open(newline="") as handle:
+            for row in csv.DictReader(handle):
+                if row.get("curve") == name and row.get("closed") in ("0", "1"):
+                    return "closed" if row["closed"] == "1" else "open"
+    return None
+
+
+def path_kinds(files: list[Path], path: str) -> list[str]:
+    """The --path each curve is designed with: `path` when it is not "auto", else what an
+    index.csv says, else "auto"."""
+    return [path if path != "auto" else (indexed_kind(f) or "auto") for f in files]
+
+
 def run_bench(
-    files: list[Path], options: DesignOptions, proposer: Proposer, say=print, setup: str = "plain"
+    files: list[Path],
+    options: DesignOptions,
+    proposer: Proposer,
+    say=print,
+    setup: str = "plain",
+    kinds: list[str] | None = None,
 ) -> dict:
-    """Design every curve (placed and constrained as `setup` says); returns per-curve rows and
-    the totals."""
+    """Design every curve (placed and constrained as `setup` says, each with its --path from
+    `kinds`, default the options' own); returns per-curve rows and the totals."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="linkd-bench-") as scratch:
         for k, file in enumerate(files):
+            own = replace(options, path=kinds[k]) if kinds else options
             curve, limits = file, Constraints()
             if setup != "plain":
                 curve = placed_curve(file, Path(scratch))
@@ -105,7 +139,7 @@ def run_bench(
                 if k == 0:
                     say(f"constraints for {file.name}: {limits.to_dict()}")
             start = time.perf_counter()
-            outcome = design(curve, Path(scratch) / f"{k}", replace(options, constraints=limits),
+            outcome = design(curve, Path(scratch) / f"{k}", replace(own, constraints=limits),
                              proposer, show=False)  # fmt: skip
             seconds = time.perf_counter() - start
             rows.append(_row(file, outcome, seconds))
@@ -121,15 +155,35 @@ def run_bench(
 
 def _row(file: Path, outcome, seconds: float) -> dict:
     figures = outcome.report.get("design") or {}
-    return {
+    curve = outcome.report.get("curve") or {}
+    row = {
         "curve": f"{file.parent.name}/{file.stem}",
+        "path": curve.get("path"),
         "valid": outcome.design is not None,
         "verified": bool(figures.get("verified", False)),
         "chamfer": figures.get("chamfer"),
         "chamfer_200": figures.get("chamfer_200"),
         "nodes": figures.get("nodes"),
+        "crank_range_deg": figures.get("crank_range_deg"),
+        "deviation": None,
+        "timing_error": figures.get("timing_error"),
         "seconds": seconds,
     }
+    if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
+        points, _ = read_path(file, "open")
+        row["deviation"] = stroke_deviation(outcome.design.mechanism, points)
+    return row
+
+
+def stroke_deviation(mech, target: np.ndarray, samples: int = 2000) -> float:
+    """Worst distance of a design's working stroke from the open target polyline, and of the
+    target from the stroke, as a fraction of the target's length."""
+    stroke = end_effector_path(mech, np.linspace(*mech.crank_range, samples))[0]
+    length = float(np.linalg.norm(np.diff(target, axis=0), axis=1).sum())
+    dense = resample(target, 20 * samples, closed=False)
+    away = cKDTree(dense).query(stroke)[0].max()
+    missed = cKDTree(resample(stroke, 20 * samples, closed=False)).query(dense)[0].max()
+    return float(max(away, missed) / length)
 
 
 def totals(rows: list[dict]) -> dict:
@@ -145,6 +199,11 @@ def totals(rows: list[dict]) -> dict:
         "chamfer_median": stat("chamfer", np.median),
         "chamfer_200_mean": stat("chamfer_200", np.mean),
         "nodes_mean": stat("nodes", np.mean),
+        "open": sum(r["path"] == "open" for r in rows),
+        "deviation_mean": stat("deviation", np.mean),
+        "deviation_max": stat("deviation", np.max),
+        "timing_error_mean": stat("timing_error", np.mean),
+        "timing_error_median": stat("timing_error", np.median),
         "seconds_mean": stat("seconds", np.mean),
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
@@ -176,6 +235,11 @@ def _line(row: dict) -> str:
     ]
     if row.get("reason"):
         cells.append(row["reason"])
+    if row["crank_range_deg"] is not None:
+        a, b = row["crank_range_deg"]
+        cells.append(f"open, crank {a:.0f}..{b:.0f} deg, deviation {row['deviation']:.2%}")
+    if row["timing_error"] is not None:
+        cells.append(f"timing {row['timing_error']:.4f}")
     return "  ".join(cells)
 
 
@@ -189,6 +253,10 @@ def summary_table(total: dict) -> str:
                            f"median {_fmt(t['chamfer_median'], '.4f')}"),
         ("chamfer (200)", f"mean {_fmt(t['chamfer_200_mean'], '.4f')}"),
         ("joints", f"mean {_fmt(t['nodes_mean'], '.1f')}"),
+        ("open paths", f"{t['open']}, stroke deviation mean {_fmt(t['deviation_mean'], '.2%')}, "
+                       f"max {_fmt(t['deviation_max'], '.2%')} of the path's length"),
+        ("timing error", f"mean {_fmt(t['timing_error_mean'], '.4f')}, "
+                         f"median {_fmt(t['timing_error_median'], '.4f')}"),
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
     ]  # fmt: skip
@@ -196,6 +264,11 @@ def summary_table(total: dict) -> str:
         lines.append(("constraints", f"{_fmt(t['constraints_held_rate'], '.1%')} of delivered "
                                      "designs meet every one"))  # fmt: skip
     return "\n".join(f"{name:<16}{value}" for name, value in lines)
+
+
+def _kind(file: Path, kind: str) -> str:
+    """Open or closed: as given, or as `linkd.paths` reads the file."""
+    return kind if kind != "auto" else ("closed" if read_path(file, "auto")[1] else "open")
 
 
 def write_json(
@@ -206,7 +279,7 @@ def write_json(
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
                 "refine": options.refine, "proposer": options.proposer,
-                "setup": setup}  # fmt: skip
+                "setup": setup, "path": options.path, "timed": options.timed}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 
@@ -218,7 +291,7 @@ def main(args) -> int:
 
     options = DesignOptions(candidates=args.candidates, strategy=args.strategy, seed=args.seed,
                             time_budget=args.time_budget, refine=args.refine,
-                            proposer=args.proposer)  # fmt: skip
+                            proposer=args.proposer, path=args.path, timed=args.timed)  # fmt: skip
     if args.proposer == "random":
         proposer = random_proposer()
     else:
@@ -229,7 +302,12 @@ def main(args) -> int:
             files += dataset_curves(args.dataset, args.limit or 100, Path(folder))
         if not files:
             raise InputError("bench design: give curve files or folders, or --dataset")
-        results = run_bench(files[: args.limit], options, proposer, setup=args.setup)
+        kinds = path_kinds(files, args.path)
+        if args.only:
+            picked = [k for k, f in enumerate(files) if _kind(f, kinds[k]) == args.only]
+            files, kinds = [files[k] for k in picked], [kinds[k] for k in picked]
+        results = run_bench(files[: args.limit], options, proposer, setup=args.setup,
+                            kinds=kinds[: args.limit])  # fmt: skip
     print(summary_table(results["total"]))
     if args.json:
         write_json(args.json, results, options, args.setup)

@@ -116,7 +116,8 @@ def rank(candidates: Candidates, c: Constraints) -> Candidates:
         return candidates
     score = candidates.chamfer + RANK_WEIGHT * violation(candidates.batch, c)
     order = np.argsort(score, kind="stable")
-    return Candidates(candidates.batch.subset(order), candidates.chamfer[order])
+    ranges = None if candidates.ranges is None else candidates.ranges[order]
+    return Candidates(candidates.batch.subset(order), candidates.chamfer[order], ranges)
 
 
 def tightened(settings: RefineSettings, c: Constraints) -> RefineSettings:

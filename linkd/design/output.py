@@ -39,14 +39,20 @@ class Delivered:
 
 
 def deliver(
-    mech: Mechanism, target: np.ndarray, folder: Path, formats: set[str], source: dict
+    mech: Mechanism,
+    target: np.ndarray,
+    folder: Path,
+    formats: set[str],
+    source: dict,
+    timed: bool = False,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
-    fails any step. `target` is the user's curve, in the mechanism's frame."""
+    fails any step. `target` is the user's curve, in the mechanism's frame (`timed`: its rows
+    equally spaced in time)."""
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
         return None
-    measures = measure(mech, target)
+    measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
     try:
         export = export_mechanism(mech, folder, set(formats) | {"mjcf"})

@@ -34,7 +34,7 @@ import numpy as np
 from linkd import __version__
 from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints, binding, check, describe, no_design
-from linkd.curves import normalise, read_curve, resample
+from linkd.curves import read_path
 from linkd.outdir import staged_output
 from linkd.validator import validate
 
@@ -52,6 +52,8 @@ from .propose import (
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
+from .stroke import Goal, make_goal, place_stroke
+from .stroke_refine import refine_stroke
 
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
@@ -78,6 +80,9 @@ class DesignOptions:
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
     # Designer's constraints, in the curve's frame and units (contract §5).
     constraints: Constraints = field(default_factory=Constraints)
+    # open paths and timing (issue 10)
+    path: str = "auto"  # "auto", "closed" or "open": what the curve is (see linkd.paths)
+    timed: bool = False  # rows equally spaced in time at constant crank speed
 
 
 class NoDesign(Exception):
@@ -109,9 +114,10 @@ def design(
     start = time.monotonic()
     stages = Stages(show)
     with stages.stage("read", "reading the curve") as note:
-        points = read_curve(curve_path)
-        target, frame = normalise(resample(points, N_POINTS))
-        note(f"{len(points)} points from {Path(curve_path).name}")
+        points, closed = read_path(curve_path, o.path)
+        goal, frame = make_goal(points, closed, o.timed, N_POINTS)
+        kind = ("closed" if closed else "open") + (", timed" if o.timed else "")
+        note(f"{len(points)} points from {Path(curve_path).name}, {kind} path")
     search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
     if o.constraints:
         search["constraints"] = o.constraints.to_dict()
@@ -119,7 +125,7 @@ def design(
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
     try:
         with single_thread(), staged_output(out, force) as stage:
-            candidates = _search(target, frame, o, proposer, stages, start, search)
+            candidates = _search(goal, frame, o, proposer, stages, start, search)
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
                                                      source)  # fmt: skip
             report = {
@@ -128,6 +134,9 @@ def design(
                     "file": str(Path(curve_path).resolve()),
                     "points": len(points),
                     "units": o.units,
+                    "path": "closed" if closed else "open",
+                    "path_option": o.path,
+                    "timed": o.timed,
                 },
                 "design": summary(found),
                 **({"constraints": [m.to_dict() for m in measured]} if measured else {}),
@@ -148,7 +157,7 @@ def design(
 
 
 def _search(
-    target: np.ndarray,
+    goal: Goal,
     frame,
     o: DesignOptions,
     proposer: Proposer | None,
@@ -156,7 +165,10 @@ def _search(
     start: float,
     search: dict,
 ) -> Candidates:
-    """Propose, place and refine; each candidate's `chamfer` is its latest curve error."""
+    """Propose, place and refine; each candidate's `chamfer` is its latest curve error (on an
+    open or timed target: its stroke's Chamfer distance, or its timing error)."""
+    stroke = not goal.closed or goal.timed
+    target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         search["proposer"] = o.proposer
@@ -175,8 +187,11 @@ def _search(
         if o.every_joint:
             batch = sub_mechanisms(batch, target, o.placed, inner.max_joints)
         batch = prune(batch, inner.max_joints)
-        candidates = place(batch, target) if len(batch) else Candidates(batch, np.zeros(0))
-        if inner.motor_at is not None:
+        if len(batch) == 0:
+            candidates = Candidates(batch, np.zeros(0))
+        else:
+            candidates = place_stroke(batch, goal) if stroke else place(batch, target)
+        if inner.motor_at is not None and not stroke:
             candidates = pin(candidates, target, np.array(inner.motor_at))
         if inner:
             candidates = rank(candidates, inner)
@@ -201,8 +216,14 @@ def _search(
                                 f"best Chamfer {best:.4f}")  # fmt: skip
 
             settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-            result = refine(candidates.batch.subset(rows), target, settings, deadline,
-                            inner or None, progress)  # fmt: skip
+            subset = candidates.batch.subset(rows)
+            if stroke:
+                result, ranges = refine_stroke(subset, candidates.ranges[rows], goal, settings,
+                                               deadline)  # fmt: skip
+                candidates.ranges[rows[result.ok]] = ranges[result.ok]
+            else:
+                result = refine(subset, target, settings, deadline, constraints=inner or None,
+                                progress=progress)  # fmt: skip
             ok = result.ok
             candidates.batch.positions[rows[ok]] = result.positions[ok]
             score[rows[ok]] = result.chamfer[ok]
@@ -212,6 +233,8 @@ def _search(
             search["budget_cut_refinement"] = result.iterations < o.refine_settings.iterations
             note(f"{result.iterations} iterations, best Chamfer {np.nanmin(score):.4f}")
     candidates.chamfer = score
+    if goal.closed:  # a closed timed path: its phase is measured again on delivery
+        candidates.ranges = None
     return candidates
 
 
@@ -239,11 +262,11 @@ def _deliver(
         found, tried, measured, unmet = None, 0, [], []
         for row in order[: o.attempts]:
             tried += 1
-            mech, measured = _checked(batch, int(row), frame, o)
+            mech, measured = _checked(batch, int(row), frame, o, _range(candidates, row))
             if mech is None:  # within the screening's sampling, but not exactly
                 unmet.append(next(m for m in measured if not m.holds))
                 continue
-            found = deliver(mech, points, stage, o.formats, source)
+            found = deliver(mech, points, stage, o.formats, source, o.timed)
             if found:
                 break
         if found is None and unmet and len(unmet) == tried:
@@ -261,11 +284,11 @@ def _deliver(
     return found, alternatives, measured
 
 
-def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions) -> tuple:
+def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions, crank_range=None) -> tuple:
     """The candidate `row` in the user's frame and units, its crank pivot exactly on the motor
     point if one was given, and each constraint measured on it; no mechanism (None) when one
     of them does not hold."""
-    mech = to_mechanism(batch, row, frame, o.units)
+    mech = to_mechanism(batch, row, frame, o.units, crank_range)
     c = o.constraints
     if not c:
         return mech, []
@@ -289,12 +312,13 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
             rows.append(int(row))
     listed: list[dict] = []
     for row in rows[: o.attempts * o.top]:
-        mech, measured = _checked(batch, row, frame, o)
+        mech, measured = _checked(batch, row, frame, o, _range(candidates, row))
         if mech is None:
             continue
         folder = stage / "alternatives" / str(len(listed) + 1)
         folder.mkdir(parents=True, exist_ok=True)
-        alt = deliver(mech, points, folder, o.formats, {**source, "alternative": len(listed) + 1})
+        alt = deliver(mech, points, folder, o.formats, {**source, "alternative": len(listed) + 1},
+                      o.timed)  # fmt: skip
         if alt is None:
             continue
         extra = {"constraints": [m.to_dict() for m in measured]} if measured else {}
@@ -307,6 +331,14 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if folder.exists() and not any(folder.iterdir()):
             folder.rmdir()
     return listed
+
+
+def _range(candidates: Candidates, row: int) -> tuple[float, float] | None:
+    """The crank range of a candidate on an open path (None on a closed one)."""
+    if candidates.ranges is None:
+        return None
+    a, b = candidates.ranges[int(row)]
+    return float(a), float(b)
 
 
 def _timings(stages: Stages, start: float) -> dict:

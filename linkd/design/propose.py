@@ -33,6 +33,7 @@ class Candidates:
 
     batch: LinkageBatch  # positions in the target's normalised frame
     chamfer: np.ndarray  # (K,) Chamfer distance of each placed path to the target
+    ranges: np.ndarray | None = None  # (K, 2) crank ranges [a, b] on an open or timed target
 
     def __len__(self) -> int:
         return len(self.chamfer)

@@ -71,20 +71,22 @@ def refine(
     target: np.ndarray,
     settings: RefineSettings | None = None,
     deadline: float | None = None,
+    objective: type[Objective] | None = None,
     constraints: Constraints | None = None,
     progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     """Refine every linkage of `batch` towards the closed `target` curve (M, 2).
 
     Positions and target must share a frame in which the target is normalised. `deadline` is a
-    `time.monotonic()` value: refinement stops early when it passes. `constraints` (in that
-    frame) add the ground-box and envelope terms and pin the crank pivot to the motor point.
-    `progress` is called after each iteration with the iterations done and the best Chamfer
-    distance so far.
+    `time.monotonic()` value: refinement stops early when it passes. `objective`: another
+    objective class (same constructor and call), for targets other than a closed path.
+    `constraints` (in that frame) add the ground-box and envelope terms and pin the crank pivot
+    to the motor point. `progress` is called after each iteration with the iterations done and
+    the best Chamfer distance so far.
     """
     with single_thread():
-        return _refine(batch, target, settings or RefineSettings(), deadline, constraints,
-                       progress)
+        return _refine(batch, target, settings or RefineSettings(), deadline,
+                       objective or Objective, constraints, progress)  # fmt: skip
 
 
 @contextmanager
@@ -124,13 +126,14 @@ def _refine(
     target: np.ndarray,
     s: RefineSettings,
     deadline: float | None,
+    objective_type: type[Objective],
     constraints: Constraints | None = None,
     progress: Callable[[int, float], None] | None = None,
 ) -> RefineResult:
     copies = len(s.ordered_weights)
     variants = batch.subset(np.repeat(np.arange(len(batch)), copies))
     plan = assembly_plan(variants.adjacency, variants.fixed, variants.valid)
-    objective = Objective(variants, plan, target, s, constraints)
+    objective = objective_type(variants, plan, target, s, constraints)
     pinned = constraints is not None and constraints.motor_at is not None
     shape = variants.positions.shape
     best = variants.positions.copy()
@@ -208,38 +211,46 @@ class Objective:
         """Terms for the candidates `rows` (k,) of the batch at their positions (k, N, 2), with
         the ordered term weighted by `ordered` (k,)."""
         s = self.s
-        index = rows.numpy()
-        n = positions.shape[1]
-        steps = int((self.plan.dyad_node[index] < n).sum(1).max(initial=0))  # this subset's
-        plan = Plan(self.plan.status[index], self.plan.dyad_node[index, :steps],
-                    self.plan.dyad_parents[index, :steps])  # fmt: skip
-        links, unlinked, valid = self.links[rows], self.unlinked[rows], self.valid[rows]
-        motion = trace(positions, plan, s.angles, full=True)
+        motion = trace(positions, self.plan_of(rows, positions.shape[1]), s.angles, full=True)
         path = motion.paths[torch.arange(len(rows)), self.end_effector[rows]]  # (k, T, 2)
         chamfer = polyline_chamfer(path, self.target)
+        penalty, ok = self.penalties(positions, rows, motion)
+        ok &= torch.isfinite(chamfer)
+        loss = chamfer + s.penalty_weight * penalty
+        if ordered.any():
+            resampled = resample_closed(path, len(self.target))
+            loss = loss + ordered * ordered_distance(resampled, self.target)
+        return Terms(loss, chamfer, ok)
 
-        worst = motion.sin2.amin(2)  # (B, S)
+    def plan_of(self, rows: torch.Tensor, n: int) -> Plan:
+        """The solve plan of the candidates `rows`, cut to the steps this subset needs."""
+        index = rows.numpy()
+        steps = int((self.plan.dyad_node[index] < n).sum(1).max(initial=0))
+        return Plan(self.plan.status[index], self.plan.dyad_node[index, :steps],
+                    self.plan.dyad_parents[index, :steps])  # fmt: skip
+
+    def penalties(self, positions: torch.Tensor, rows: torch.Tensor, motion) -> tuple:
+        """(k,) soft buildability (and constraint) penalty and (k,) whether the hard limits
+        hold, for the candidates `rows` at positions (k, N, 2) moving as `motion`."""
+        s = self.s
+        sin2 = motion.sin2  # (k, S, T) transmissions
+        links, unlinked, valid = self.links[rows], self.unlinked[rows], self.valid[rows]
+        worst = sin2.amin(2)  # (B, S)
         lock = torch.relu(s.soft_margin - worst).pow(2).sum(1)
         d = torch.sqrt(((positions[:, :, None] - positions[:, None, :]) ** 2).sum(-1) + 1e-12)
         short = torch.where(links, torch.relu(1.5 * s.min_link - d), 0).pow(2).sum((1, 2))
         close = torch.where(unlinked, torch.relu(1.5 * s.min_gap - d), 0).pow(2).sum((1, 2))
         radius = torch.sqrt((positions**2).sum(-1) + 1e-12)
         far = torch.where(valid, torch.relu(radius - s.max_radius), 0).pow(2).sum(1)
+        with torch.no_grad():
+            ok = worst.amin(1) >= s.min_margin
+            ok &= ~(links & (d < s.min_link)).any((1, 2))
+            ok &= ~(unlinked & (d < s.min_gap)).any((1, 2))
         penalty = lock + short + close + far
-        ok = torch.isfinite(chamfer)
         if self.barriers is not None:
             extra, inside = self.barriers(positions, motion.x, motion.y, rows)
             penalty, ok = penalty + extra, ok & inside
-
-        with torch.no_grad():
-            ok &= worst.amin(1) >= s.min_margin
-            ok &= ~(links & (d < s.min_link)).any((1, 2))
-            ok &= ~(unlinked & (d < s.min_gap)).any((1, 2))
-        loss = chamfer + s.penalty_weight * penalty
-        if ordered.any():
-            resampled = resample_closed(path, len(self.target))
-            loss = loss + ordered * ordered_distance(resampled, self.target)
-        return Terms(loss, chamfer, ok)
+        return penalty, ok
 
 
 def polyline_chamfer(path: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

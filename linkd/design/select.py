@@ -17,6 +17,7 @@ from linkd.curves import chamfer, curve_moments, resample
 from linkd.geometry import Similarity
 from linkd.kinematics import trace
 from linkd.mechanism import Mechanism
+from linkd.paths import row_angles, stroke_error, timing_error
 from linkd.topology import assembly_plan
 
 CHAMFER_POINTS = 2000
@@ -48,12 +49,19 @@ def diverse_best(batch: LinkageBatch, order: np.ndarray, count: int, per_topolog
     return chosen
 
 
-def to_mechanism(batch: LinkageBatch, row: int, frame: Similarity, units: str) -> Mechanism:
+def to_mechanism(
+    batch: LinkageBatch,
+    row: int,
+    frame: Similarity,
+    units: str,
+    crank_range: tuple[float, float] | None = None,
+) -> Mechanism:
     """The candidate `row` as a Mechanism, its positions mapped by `frame` (to the user's)."""
     n = int(batch.valid[row].sum())
     links = tuple(zip(*np.nonzero(np.triu(batch.adjacency[row, :n, :n], 1))))
     positions = frame.apply(batch.positions[row, :n])
-    return Mechanism(positions, batch.fixed[row, :n], links, (0, 1), batch.end_effector[row], units)
+    mech = Mechanism(positions, batch.fixed[row, :n], links, (0, 1), batch.end_effector[row], units)
+    return mech.replace(crank_range=crank_range)
 
 
 @dataclass
@@ -65,19 +73,29 @@ class Measures:
     nodes: int
     footprint: tuple[float, float]  # width, height of the area the joints sweep
     worst_transmission_deg: float  # the transmission angle closest to 0 or 180, in degrees
+    # On an open path: the crank range of the stroke, degrees; the curve errors are then those
+    # of the stroke. On a timed path: the timing error (`linkd.paths.timing_error`).
+    crank_range_deg: tuple[float, float] | None = None
+    timing_error: float | None = None
 
     def to_dict(self) -> dict:
-        return {
+        figures = {
             "chamfer": self.chamfer,
             "chamfer_200": self.chamfer_200,
             "nodes": self.nodes,
             "footprint": list(self.footprint),
             "worst_transmission_deg": self.worst_transmission_deg,
         }
+        if self.crank_range_deg is not None:
+            figures["crank_range_deg"] = list(self.crank_range_deg)
+        if self.timing_error is not None:
+            figures["timing_error"] = self.timing_error
+        return figures
 
 
-def end_effector_path(mech: Mechanism, angles: int = TRACE_ANGLES) -> tuple:
-    """(T, 2) end-effector path, (N, T, 2) all joint paths and the worst sin^2 of a dyad."""
+def end_effector_path(mech: Mechanism, angles: int | np.ndarray = TRACE_ANGLES) -> tuple:
+    """(T, 2) end-effector path, (N, T, 2) all joint paths and the worst sin^2 of a dyad, at
+    `angles` crank angles round the revolution or at the crank angles given."""
     batch = LinkageBatch.from_mechanisms([mech])
     plan = assembly_plan(batch.adjacency, batch.fixed, batch.valid)
     motion = trace(batch.positions, plan, angles)
@@ -94,16 +112,40 @@ def curve_error(path: np.ndarray, target: np.ndarray, points: int = CHAMFER_POIN
     return chamfer(a, b)
 
 
-def measure(mech: Mechanism, target: np.ndarray) -> Measures:
-    """Curve error and buildability figures of a design against the target, both in one frame."""
+def measure(mech: Mechanism, target: np.ndarray, timed: bool = False) -> Measures:
+    """Curve error and buildability figures of a design against the target, both in one frame:
+    against the stroke of its crank range when it has one, and the timing error when `timed`."""
     path, paths, margin = end_effector_path(mech)
     sweep = paths.reshape(-1, 2)
     extent = sweep.max(0) - sweep.min(0)
     worst = float(np.degrees(np.arcsin(np.sqrt(np.clip(margin, 0.0, 1.0)))))
+    if mech.crank_range is None:
+        errors = curve_error(path, target), curve_error(path, target, 200)
+        degrees = None
+    else:
+        stroke = end_effector_path(mech, np.linspace(*mech.crank_range, TRACE_ANGLES))[0]
+        errors = stroke_error(stroke, target), stroke_error(stroke, target, 200)
+        degrees = tuple(float(np.degrees(v)) for v in mech.crank_range)
     return Measures(
-        curve_error(path, target),
-        curve_error(path, target, 200),
+        *errors,
         mech.n_nodes,
         (float(extent[0]), float(extent[1])),
         worst,
+        degrees,
+        timing_of(mech, target) if timed else None,
     )
+
+
+def timing_of(mech: Mechanism, rows: np.ndarray, substeps: int = 16) -> float:
+    """Timing error of a design for timed rows: on its crank range when it has one, else over
+    the revolution at the best phase (searched in steps of 1/substeps of the rows' spacing)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    n = len(rows)
+    if mech.crank_range is not None:
+        return timing_error(end_effector_path(mech, row_angles(n, False, mech.crank_range))[0],
+                            rows)  # fmt: skip
+    path = end_effector_path(mech, n * substeps)[0]
+    index = (np.arange(n * substeps)[:, None] + substeps * np.arange(n)) % (n * substeps)
+    gaps = np.linalg.norm(path[index] - rows, axis=2).mean(1)  # (phases,)
+    best = int(np.argmin(gaps))
+    return timing_error(path[index[best]], rows)
