@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,19 @@ from linkd.batch import LinkageBatch
 from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
 
+from .atlas import DEFAULT_PATH, Atlas
+from .atlas import load as load_atlas
 from .output import Delivered, deliver, finish, summary
-from .propose import Candidates, Proposer, model_proposer, place, propose, sub_mechanisms
+from .propose import (
+    SOURCES,
+    Candidates,
+    Proposer,
+    joined,
+    model_proposer,
+    place,
+    propose,
+    sub_mechanisms,
+)
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
@@ -59,6 +71,10 @@ class DesignOptions:
     attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
+    # The atlas (issue 9): paths looked up by shape next to the proposer's designs.
+    atlas: bool = True
+    atlas_path: str | None = None  # None: the shipped atlas
+    atlas_paths: int = 1024  # paths looked up, nearest first
 
 
 class NoDesign(Exception):
@@ -100,6 +116,7 @@ def design(
         with single_thread(), staged_output(out, force) as stage:
             candidates = _search(target, o, proposer, stages, start, search)
             found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source)
+            search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
                 "curve": {
@@ -141,16 +158,27 @@ def _search(
             search["model"] = o.model or "shipped"
         graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
         note(f"{len(graphs)} designs")
+    batches = [LinkageBatch.from_graphs(graphs)]
+    if o.atlas:
+        with stages.stage("atlas", "looking the shape up in the atlas") as note:
+            atlas = _atlas(o.atlas_path)
+            if atlas is None:
+                note("no atlas (build one with `linkd atlas build`)")
+            else:
+                batches.append(atlas.query(target, o.atlas_paths))
+                note(f"{len(batches[-1])} paths of {len(atlas):,}")
     with stages.stage("align", "placing designs on the curve") as note:
-        batch = LinkageBatch.from_graphs(graphs)
         if o.every_joint:
-            batch = sub_mechanisms(batch, target, o.placed)
-        candidates = place(batch, target)
+            batches[0] = sub_mechanisms(batches[0], target, o.placed)
+        source = np.concatenate([np.full(len(b), k) for k, b in enumerate(batches)])
+        candidates = place(joined(batches), target, source)
         search["proposed"], search["valid"] = len(graphs), len(candidates)
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
         note(f"{len(candidates)} valid{best}")
     if len(candidates) == 0:
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
+    search["sources"] = {name: _contribution(candidates, k) for k, name in enumerate(SOURCES)
+                         if (candidates.source == k).any()}  # fmt: skip
     score = candidates.chamfer.copy()
     search["refined"] = 0
     if o.refine:
@@ -164,6 +192,12 @@ def _search(
             score[rows[ok]] = result.chamfer[ok]
             score[rows[~ok]] = np.inf  # never within the refinement's limits: tried last
             search["refined"] = int(ok.sum())
+            for k, name in enumerate(SOURCES):
+                if name in search["sources"]:
+                    mine = candidates.source[rows] == k
+                    search["sources"][name]["refined"] = int(mine.sum())
+                    best_refined = np.min(score[rows[mine]], initial=np.inf)
+                    search["sources"][name]["best_refined"] = _finite(best_refined)
             search["refine_iterations"] = result.iterations
             search["budget_cut_refinement"] = result.iterations < o.refine_settings.iterations
             note(f"{result.iterations} iterations, best Chamfer {np.nanmin(score):.4f}")
@@ -188,7 +222,8 @@ def _deliver(
         for row in order[: o.attempts]:
             tried += 1
             mech = to_mechanism(batch, int(row), frame, o.units)
-            found = deliver(mech, points, stage, o.formats, source)
+            origin = SOURCES[candidates.source[row]]
+            found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin})
             if found:
                 break
         if found is None:
@@ -230,6 +265,24 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if folder.exists() and not any(folder.iterdir()):
             folder.rmdir()
     return listed
+
+
+@cache
+def _atlas(path: str | None) -> Atlas | None:
+    """The atlas at `path` (None: the shipped one, or None when it has not been built)."""
+    if path is None and not DEFAULT_PATH.exists():
+        return None
+    return load_atlas(path)
+
+
+def _contribution(candidates: Candidates, source: int) -> dict:
+    """What one source offered: its placed candidates and the best of them."""
+    mine = candidates.source == source
+    return {"placed": int(mine.sum()), "best_placed": _finite(np.min(candidates.chamfer[mine]))}
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def _timings(stages: Stages, start: float) -> dict:

@@ -33,9 +33,19 @@ class Candidates:
 
     batch: LinkageBatch  # positions in the target's normalised frame
     chamfer: np.ndarray  # (K,) Chamfer distance of each placed path to the target
+    source: np.ndarray  # (K,) where each came from: an index into SOURCES
 
     def __len__(self) -> int:
         return len(self.chamfer)
+
+
+SOURCES = ("model", "atlas", "round 2")  # the proposer, the atlas, the search around the best
+
+
+def joined(batches: list[LinkageBatch]) -> LinkageBatch:
+    """One batch of the linkages of several (all padded to the same number of joints)."""
+    fields = ("positions", "fixed", "valid", "adjacency", "end_effector")
+    return LinkageBatch(*(np.concatenate([getattr(b, f) for b in batches]) for f in fields))
 
 
 def augmented(target: np.ndarray, rotations: int) -> np.ndarray:
@@ -91,9 +101,15 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
         return batch  # nothing valid moves: `place` finds no candidate
     if len(rows) > keep:
         curves = resample_closed(paths[rows, joints].double(), 64)
-        gap = _descriptor(curves) - _descriptor(torch.as_tensor(target)[None])
+        gap = descriptor(curves) - descriptor(torch.as_tensor(target)[None])
         best = torch.topk(gap.norm(dim=1), keep, largest=False).indices.sort().values.numpy()
         rows, joints = rows[best], joints[best]
+    return extract(batch, rows, joints)
+
+
+def extract(batch: LinkageBatch, rows: np.ndarray, joints: np.ndarray) -> LinkageBatch:
+    """For each pair (rows[i], joints[i]), the linkage of that joint and the joints it hangs on
+    (down to the crank and the ground) in `batch`, with that joint as end effector."""
     n = batch.valid.shape[1]
     parents = np.tril(batch.adjacency[rows], -1)  # dyadic order: parents come first
     needed = np.zeros((len(rows), n), bool)
@@ -115,7 +131,7 @@ def sub_mechanisms(batch: LinkageBatch, target: np.ndarray, keep: int) -> Linkag
     )
 
 
-def _descriptor(curves: torch.Tensor) -> torch.Tensor:
+def descriptor(curves: torch.Tensor) -> torch.Tensor:
     """(B, 2 * HARMONICS) Fourier magnitudes of closed curves (B, M, 2) equally spaced by arc
     length, scaled by the first harmonics: unchanged by translation, scale, rotation, start
     point, and (harmonics k and -k paired in sorted order) reflection and direction."""
@@ -125,16 +141,18 @@ def _descriptor(curves: torch.Tensor) -> torch.Tensor:
     return pairs / pairs[:, :2].sum(1, keepdim=True).clamp_min(1e-12)
 
 
-def place(batch: LinkageBatch, target: np.ndarray) -> Candidates:
-    """Keep the valid linkages of `batch` and move each onto the target by its best similarity."""
+def place(batch: LinkageBatch, target: np.ndarray, source: np.ndarray | None = None) -> Candidates:
+    """Keep the valid linkages of `batch` and move each onto the target by its best similarity.
+    source: (B,) index into SOURCES of each linkage (default: all from the model)."""
+    source = np.zeros(len(batch), int) if source is None else np.asarray(source)
     result = validate(batch, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
     batch, paths = batch.subset(keep), paths[keep]
     if len(keep) == 0:
-        return Candidates(batch, np.zeros(0))
+        return Candidates(batch, np.zeros(0), source[keep])
     even = resample_closed(torch.as_tensor(paths), len(target)).numpy()
     similarity, chamfer = align(even, target)
     batch.positions = similarity.apply(batch.positions)
     order = np.argsort(chamfer, kind="stable")
-    return Candidates(batch.subset(order), chamfer[order])
+    return Candidates(batch.subset(order), chamfer[order], source[keep][order])
