@@ -1,9 +1,10 @@
 """The `linkd design` run: a user's curve to a verified, exported mechanism that traces it.
 
 Stages, each timed and shown on a terminal:
-1. read     the curve file; resample it by arc length and normalise it (centroid 0, RMS radius
-            1), remembering the similarity back to the user's frame;
-2. propose  LinkD designs for the target and its turned and mirrored copies;
+1. read     the curve file; resample it by arc length, filtered (drawn.py), and normalise it
+            (centroid 0, RMS radius 1), remembering the similarity back to the user's frame;
+2. propose  LinkD designs for the target and its turned and mirrored copies, and the
+            mechanisms of the atlas whose paths have the target's shape (atlas.py);
 3. align    offer each valid design's sub-mechanisms too (any moving joint as end effector,
             with the joints it hangs on), keep those whose shape is most like the target, place
             each on the target by its best similarity, rank by Chamfer;
@@ -29,11 +30,12 @@ import numpy as np
 
 from linkd import __version__
 from linkd.batch import LinkageBatch
-from linkd.curves import normalise, read_curve, resample
+from linkd.curves import normalise, read_curve
 from linkd.outdir import staged_output
 
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
+from .drawn import read_target
 from .output import Delivered, deliver, finish, summary
 from .propose import (
     SOURCES,
@@ -75,6 +77,7 @@ class DesignOptions:
     atlas: bool = True
     atlas_path: str | None = None  # None: the shipped atlas
     atlas_paths: int = 1024  # paths looked up, nearest first
+    smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
 
 
 class NoDesign(Exception):
@@ -107,7 +110,7 @@ def design(
     stages = Stages(show)
     with stages.stage("read", "reading the curve") as note:
         points = read_curve(curve_path)
-        target, frame = normalise(resample(points, N_POINTS))
+        target, frame = normalise(read_target(points, N_POINTS, o.smooth))
         note(f"{len(points)} points from {Path(curve_path).name}")
     search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,

@@ -1,0 +1,60 @@
+"""The atlas: built deterministically, stored and read back whole, and it finds the
+mechanisms whose paths look like a target."""
+
+import numpy as np
+import pytest
+
+from linkd.cli import main
+from linkd.design.atlas import build, load
+from linkd.design.propose import place
+from linkd.errors import InputError
+from linkd.validator import validate
+
+
+@pytest.fixture(scope="module")
+def atlas():
+    return build(300, seed=5)
+
+
+def test_build_is_deterministic_and_indexes_moving_joints(atlas):
+    again = build(300, seed=5)
+    for name in ("positions", "fixed", "links", "mechanism", "joint", "shape"):
+        assert np.array_equal(getattr(atlas, name), getattr(again, name)), name
+    assert len(atlas) > len(atlas.positions)  # several paths per mechanism on average
+    whole = atlas.batch(np.arange(len(atlas.positions)))
+    assert validate(whole).valid.all()  # every stored mechanism works once rounded
+    assert not whole.fixed[np.arange(len(whole))[atlas.mechanism], atlas.joint].any()
+    assert (atlas.joint >= 2).all()  # neither the pivot nor the crank tip
+
+
+def test_saved_atlas_reads_back_and_bad_files_are_refused(atlas, tmp_path):
+    atlas.save(tmp_path / "atlas.npz")
+    back = load(tmp_path / "atlas.npz")
+    assert back.meta == atlas.meta and np.array_equal(back.shape, atlas.shape)
+    assert [p.name for p in tmp_path.iterdir()] == ["atlas.npz"]  # no scratch file left
+    (tmp_path / "bad.npz").write_text("not an atlas")
+    with pytest.raises(InputError, match=r"bad\.npz: not a linkd atlas"):
+        load(tmp_path / "bad.npz")
+
+
+def test_a_path_of_the_atlas_is_found_first_and_placed_exactly(atlas):
+    entry = 123
+    whole = atlas.batch(atlas.mechanism[[entry]])
+    motion = validate(whole, n_angles=400, keep_motion=True).motion
+    joint = atlas.joint[entry]
+    path = np.stack([motion.x[0, joint], motion.y[0, joint]], -1)
+    turned = path @ np.array([[0.6, -0.8], [0.8, 0.6]]) * 3.0 + 5.0  # moved, turned, scaled
+    found = atlas.nearest(turned[::-1], 5)  # walked backwards too
+    same = np.flatnonzero(np.all(atlas.shape == atlas.shape[entry], axis=1))
+    assert found[0] in same
+    target = (turned - turned.mean(0)) / np.sqrt(((turned - turned.mean(0)) ** 2).sum(1).mean())
+    placed = place(atlas.query(target, 5), target)
+    assert len(placed) >= 1 and placed.chamfer[0] < 0.02
+
+
+def test_atlas_build_command(tmp_path, capsys):
+    out = tmp_path / "small.npz"
+    assert main(["atlas", "build", "--count", "40", "--seed", "1", "--out", str(out)]) == 0
+    assert load(out).meta["seed"] == 1 and "mechanisms" in capsys.readouterr().out
+    assert main(["atlas", "build", "--count", "0", "--out", str(out)]) == 2
+    assert main(["atlas", "build", "--out", str(tmp_path / "no" / "a.npz"), "--count", "5"]) == 2
