@@ -42,12 +42,14 @@ from .propose import (
     Candidates,
     Proposer,
     joined,
+    merged,
     model_proposer,
     place,
     propose,
     sub_mechanisms,
 )
 from .refine import RefineSettings, refine, single_thread
+from .rounds import around
 from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
 
@@ -78,6 +80,10 @@ class DesignOptions:
     atlas_path: str | None = None  # None: the shipped atlas
     atlas_paths: int = 1024  # paths looked up, nearest first
     smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
+    rounds: int = 1  # refinement rounds; each after the first searches around the best so far
+    around: int = 4  # designs (of distinct topologies) searched around
+    around_copies: int = 16  # jittered copies of each
+    around_spread: float = 0.1  # their joints move by this much (normalised frame)
 
 
 class NoDesign(Exception):
@@ -180,32 +186,50 @@ def _search(
         note(f"{len(candidates)} valid{best}")
     if len(candidates) == 0:
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
-    search["sources"] = {name: _contribution(candidates, k) for k, name in enumerate(SOURCES)
-                         if (candidates.source == k).any()}  # fmt: skip
-    score = candidates.chamfer.copy()
+    placed = candidates.chamfer.copy()
+    candidates.chamfer = candidates.chamfer.copy()
     search["refined"] = 0
     if o.refine:
-        rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
-                                     o.refine_count, o.per_topology))  # fmt: skip
         deadline = start + o.time_budget - DELIVERY_RESERVE
-        with stages.stage("refine", f"refining {len(rows)} designs") as note:
-            result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline)
-            ok = result.ok
-            candidates.batch.positions[rows[ok]] = result.positions[ok]
-            score[rows[ok]] = result.chamfer[ok]
-            score[rows[~ok]] = np.inf  # never within the refinement's limits: tried last
-            search["refined"] = int(ok.sum())
-            for k, name in enumerate(SOURCES):
-                if name in search["sources"]:
-                    mine = candidates.source[rows] == k
-                    search["sources"][name]["refined"] = int(mine.sum())
-                    best_refined = np.min(score[rows[mine]], initial=np.inf)
-                    search["sources"][name]["best_refined"] = _finite(best_refined)
-            search["refine_iterations"] = result.iterations
-            search["budget_cut_refinement"] = result.iterations < o.refine_settings.iterations
-            note(f"{result.iterations} iterations, best Chamfer {np.nanmin(score):.4f}")
-    candidates.chamfer = score
+        with stages.stage("refine", "refining the best designs") as note:
+            rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
+                                         o.refine_count, o.per_topology), int)  # fmt: skip
+            iterations = _refine_rows(candidates, rows, target, o, deadline)
+            search["refine_iterations"] = iterations
+            search["budget_cut_refinement"] = iterations < o.refine_settings.iterations
+            note(f"{len(rows)} designs, {iterations} iterations, "
+                 f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        for _ in range(o.rounds - 1):
+            with stages.stage("round", "searching around the best designs") as note:
+                nearby = around(candidates, o.around, o.around_copies, o.around_spread,
+                                o.seed + len(candidates))  # fmt: skip
+                found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
+                first = len(candidates)
+                candidates = merged(candidates, found)
+                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
+                                                     o.refine_count, o.refine_count), int)
+                done = _refine_rows(candidates, rows, target, o, deadline)
+                note(f"{len(rows)} designs, {done} iterations, "
+                     f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        search["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
+    used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
+    search["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
     return candidates
+
+
+def _refine_rows(
+    candidates: Candidates, rows: np.ndarray, target: np.ndarray, o: DesignOptions, deadline
+) -> int:
+    """Refine the candidates `rows` in place (those never within the refinement's limits get
+    an infinite error: tried last); returns the iterations run."""
+    if len(rows) == 0:
+        return 0
+    result = refine(candidates.batch.subset(rows), target, o.refine_settings, deadline)
+    ok = result.ok
+    candidates.batch.positions[rows[ok]] = result.positions[ok]
+    candidates.chamfer[rows] = np.where(ok, result.chamfer, np.inf)
+    candidates.refined[rows] = True
+    return result.iterations
 
 
 def _deliver(
@@ -278,10 +302,16 @@ def _atlas(path: str | None) -> Atlas | None:
     return load_atlas(path)
 
 
-def _contribution(candidates: Candidates, source: int) -> dict:
-    """What one source offered: its placed candidates and the best of them."""
+def _contribution(candidates: Candidates, source: int, placed: np.ndarray) -> dict:
+    """What one source offered: its candidates placed on the target and refined, and the best
+    of each (`placed`: the errors before refinement, of the first candidates)."""
     mine = candidates.source == source
-    return {"placed": int(mine.sum()), "best_placed": _finite(np.min(candidates.chamfer[mine]))}
+    first = mine[: len(placed)]
+    refined = candidates.chamfer[mine & candidates.refined]
+    return {"placed": int(mine.sum()),
+            "best_placed": _finite(np.min(placed[first], initial=np.inf)),
+            "refined": len(refined),
+            "best_refined": _finite(np.min(refined, initial=np.inf))}  # fmt: skip
 
 
 def _finite(value: float) -> float | None:

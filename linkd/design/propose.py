@@ -34,9 +34,22 @@ class Candidates:
     batch: LinkageBatch  # positions in the target's normalised frame
     chamfer: np.ndarray  # (K,) Chamfer distance of each placed path to the target
     source: np.ndarray  # (K,) where each came from: an index into SOURCES
+    refined: np.ndarray | None = None  # (K,) bool, whether refinement has had it (default none)
+
+    def __post_init__(self) -> None:
+        if self.refined is None:
+            self.refined = np.zeros(len(self.chamfer), bool)
 
     def __len__(self) -> int:
         return len(self.chamfer)
+
+
+def merged(first: Candidates, second: Candidates) -> Candidates:
+    """The candidates of both, first's then second's (not re-sorted)."""
+    return Candidates(joined([first.batch, second.batch]),
+                      np.concatenate([first.chamfer, second.chamfer]),
+                      np.concatenate([first.source, second.source]),
+                      np.concatenate([first.refined, second.refined]))  # fmt: skip
 
 
 SOURCES = ("model", "atlas", "round 2")  # the proposer, the atlas, the search around the best
