@@ -206,6 +206,7 @@ def _search(
                 found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
                 first = len(candidates)
                 candidates = merged(candidates, found)
+                placed = np.concatenate([placed, found.chamfer])
                 rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
                                                      o.refine_count, o.refine_count), int)
                 done = _refine_rows(candidates, rows, target, o, deadline)
@@ -304,12 +305,11 @@ def _atlas(path: str | None) -> Atlas | None:
 
 def _contribution(candidates: Candidates, source: int, placed: np.ndarray) -> dict:
     """What one source offered: its candidates placed on the target and refined, and the best
-    of each (`placed`: the errors before refinement, of the first candidates)."""
+    of each (`placed`: the errors before refinement)."""
     mine = candidates.source == source
-    first = mine[: len(placed)]
     refined = candidates.chamfer[mine & candidates.refined]
     return {"placed": int(mine.sum()),
-            "best_placed": _finite(np.min(placed[first], initial=np.inf)),
+            "best_placed": _finite(np.min(placed[mine], initial=np.inf)),
             "refined": len(refined),
             "best_refined": _finite(np.min(refined, initial=np.inf))}  # fmt: skip
 
