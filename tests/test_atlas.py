@@ -58,3 +58,28 @@ def test_atlas_build_command(tmp_path, capsys):
     assert load(out).meta["seed"] == 1 and "mechanisms" in capsys.readouterr().out
     assert main(["atlas", "build", "--count", "0", "--out", str(out)]) == 2
     assert main(["atlas", "build", "--out", str(tmp_path / "no" / "a.npz"), "--count", "5"]) == 2
+
+
+def test_design_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atlas, tmp_path):
+    from test_design import options, pool_proposer
+
+    from linkd.curves import resample, write_curve
+    from linkd.design.pipeline import design
+    from linkd.design.select import end_effector_path
+    from linkd.generator import GeneratorSettings, generate
+    from linkd.graph import from_graph
+
+    pool = generate(8, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
+    curve = tmp_path / "curve.csv"
+    write_curve(curve, 30.0 * resample(end_effector_path(from_graph(pool[1]), 600)[0], 150))
+    atlas.save(tmp_path / "atlas.npz")
+    opts = options(atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=64, rounds=2,
+                   around=2, around_copies=4, candidates=8)  # fmt: skip
+    outcome = design(curve, tmp_path / "out", opts, proposer=pool_proposer(pool), show=False)
+    search = outcome.report["search"]
+    assert outcome.design is not None and outcome.design.measures.chamfer < 0.05
+    assert set(search["sources"]) >= {"model", "atlas"}
+    assert search["sources"]["atlas"]["placed"] > 0
+    assert search["found_by"] in search["sources"]
+    for figures in search["sources"].values():
+        assert figures["refined"] <= figures["placed"]

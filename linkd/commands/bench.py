@@ -51,6 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
     d.add_argument("--json", help="also write the figures to this JSON file")
+    from linkd.commands.design import add_search_options
+
+    add_search_options(d)
     d.set_defaults(run=design)
 
 

@@ -78,7 +78,8 @@ class Atlas:
         first. target: (M, 2) closed curve."""
         if self._codes is None:
             self._codes = torch.as_tensor(self.shape).float()
-        even = resample_closed(torch.as_tensor(target, dtype=torch.float64)[None], SHAPE_POINTS)
+        curve = torch.as_tensor(np.ascontiguousarray(target), dtype=torch.float64)[None]
+        even = resample_closed(curve, SHAPE_POINTS)
         query = torch.as_tensor(quantise(descriptor(even).numpy())).float()
         gap = torch.cdist(query, self._codes)[0]
         count = min(count, len(gap))

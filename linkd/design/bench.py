@@ -74,6 +74,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "chamfer_200": figures.get("chamfer_200"),
         "nodes": figures.get("nodes"),
         "seconds": seconds,
+        "found_by": outcome.report["search"].get("found_by"),
     }
 
 
@@ -93,6 +94,8 @@ def totals(rows: list[dict]) -> dict:
         "seconds_mean": stat("seconds", np.mean),
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
+        "found_by": {name: sum(r["found_by"] == name for r in rows)
+                     for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
     }
 
 
@@ -109,6 +112,7 @@ def _line(row: dict) -> str:
         f"(200 pts {_fmt(row['chamfer_200'], '.4f'):>6})",
         f"joints {_fmt(row['nodes'], 'd'):>2}",
         f"{row['seconds']:6.1f} s",
+        f"from {row['found_by'] or '-'}",
     ]
     return "  ".join(cells)
 
@@ -125,6 +129,7 @@ def summary_table(total: dict) -> str:
         ("joints", f"mean {_fmt(t['nodes_mean'], '.1f')}"),
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
+        ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
     ]  # fmt: skip
     return "\n".join(f"{name:<16}{value}" for name, value in lines)
 
@@ -134,18 +139,21 @@ def write_json(path: str | Path, results: dict, options: DesignOptions) -> None:
 
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
-                "refine": options.refine}  # fmt: skip
+                "refine": options.refine, "atlas": options.atlas and
+                (options.atlas_path or "shipped"), "rounds": options.rounds}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 
 def main(args) -> int:
     """`linkd bench design`: parsed arguments in, figures printed (and written as JSON)."""
+    from linkd.commands.design import search_options
     from linkd.sample import load_model
 
     from .propose import model_proposer
 
     options = DesignOptions(candidates=args.candidates, strategy=args.strategy, seed=args.seed,
-                            time_budget=args.time_budget, refine=args.refine)  # fmt: skip
+                            time_budget=args.time_budget, refine=args.refine,
+                            **search_options(args))  # fmt: skip
     proposer = model_proposer(load_model(args.model), args.strategy)
     with tempfile.TemporaryDirectory(prefix="linkd-curves-") as folder:
         files = curve_files(args.curves) if args.curves else []
