@@ -16,6 +16,7 @@ packed bits, descriptors as one byte per value.
 
 from __future__ import annotations
 
+import importlib.resources
 import json
 import os
 from dataclasses import dataclass, field
@@ -35,7 +36,7 @@ from .propose import descriptor, extract
 from .refine import resample_closed
 
 FORMAT = "linkd-atlas/1"
-DEFAULT_PATH = Path(__file__).resolve().parents[1] / "assets" / "atlas.npz"
+DEFAULT_PATH = Path(str(importlib.resources.files("linkd.assets") / "atlas.npz"))  # shipped
 CHUNK = 2000  # mechanisms generated per seeded job
 ANGLES = 128  # crank angles each path is traced at for its descriptor
 SHAPE_POINTS = 64  # points by arc length the descriptor is taken from

@@ -19,7 +19,7 @@ import numpy as np
 from linkd.curves import write_curve
 from linkd.errors import InputError
 
-from .pipeline import DesignOptions, design
+from .pipeline import DesignOptions, design, search_width
 from .propose import Proposer
 
 
@@ -75,6 +75,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "nodes": figures.get("nodes"),
         "seconds": seconds,
         "found_by": outcome.report["search"].get("found_by"),
+        "sources": outcome.report["search"].get("sources", {}),
     }
 
 
@@ -96,7 +97,31 @@ def totals(rows: list[dict]) -> dict:
         "seconds_max": stat("seconds", np.max),
         "found_by": {name: sum(r["found_by"] == name for r in rows)
                      for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
+        "stages": stages(rows),
     }
+
+
+def stages(rows: list[dict]) -> dict:
+    """Mean over the curves of the best error each stage reached (normalised frame, the
+    refinement's own measure): placed candidates from the proposer, from the proposer and the
+    atlas, then refined, then after the later rounds. A curve without a figure for a stage
+    (the source offered nothing) counts with the stage before."""
+    columns: dict[str, list[float]] = {}
+    for row in rows:
+        sources = row.get("sources") or {}
+        best = np.inf
+
+        def reached(name: str, value) -> None:
+            nonlocal best
+            best = min(best, np.inf if value is None else value)
+            columns.setdefault(name, []).append(best)
+
+        reached("model, placed", sources.get("model", {}).get("best_placed"))
+        reached("+ atlas, placed", sources.get("atlas", {}).get("best_placed"))
+        refined = [sources.get(name, {}).get("best_refined") for name in ("model", "atlas")]
+        reached("+ refinement", min((v for v in refined if v is not None), default=None))
+        reached("+ later rounds", sources.get("round 2", {}).get("best_refined"))
+    return {name: float(np.mean(v)) for name, v in columns.items() if np.isfinite(v).all()}
 
 
 def _fmt(value, spec: str) -> str:
@@ -130,6 +155,7 @@ def summary_table(total: dict) -> str:
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
         ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
+        ("stages", ", ".join(f"{k} {v:.4f}" for k, v in t["stages"].items()) or "-"),
     ]  # fmt: skip
     return "\n".join(f"{name:<16}{value}" for name, value in lines)
 
@@ -140,7 +166,7 @@ def write_json(path: str | Path, results: dict, options: DesignOptions) -> None:
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
                 "refine": options.refine, "atlas": options.atlas and
-                (options.atlas_path or "shipped"), "rounds": options.rounds}  # fmt: skip
+                (options.atlas_path or "shipped"), "rounds": search_width(options)[0]}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 

@@ -78,12 +78,21 @@ class DesignOptions:
     # The atlas (issue 9): paths looked up by shape next to the proposer's designs.
     atlas: bool = True
     atlas_path: str | None = None  # None: the shipped atlas
-    atlas_paths: int = 1024  # paths looked up, nearest first
+    atlas_paths: int | None = None  # paths looked up, nearest first (None: from the budget)
     smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
-    rounds: int = 1  # refinement rounds; each after the first searches around the best so far
+    rounds: int | None = None  # refinement rounds, each after the first searching around the
+    # best so far (None: from the budget)
     around: int = 4  # designs (of distinct topologies) searched around
     around_copies: int = 16  # jittered copies of each
     around_spread: float = 0.1  # their joints move by this much (normalised frame)
+
+
+def search_width(o: DesignOptions) -> tuple[int, int]:
+    """Refinement rounds and atlas paths for the time budget, where not given: two rounds and
+    1024 paths for the default 30 s, one round and 1024 paths more for every further 30 s. (The
+    budget's deadline still stops refinement early on a slow or busy machine.)"""
+    steps = max(1, round(o.time_budget / 30))
+    return o.rounds or 1 + steps, o.atlas_paths or 1024 * steps
 
 
 class NoDesign(Exception):
@@ -159,6 +168,8 @@ def _search(
     search: dict,
 ) -> Candidates:
     """Propose, place and refine; each candidate's `chamfer` is its latest curve error."""
+    rounds, atlas_paths = search_width(o)
+    search["rounds"] = rounds
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         if proposer is None:
             from linkd.sample import load_model
@@ -174,7 +185,7 @@ def _search(
             if atlas is None:
                 note("no atlas (build one with `linkd atlas build`)")
             else:
-                batches.append(atlas.query(target, o.atlas_paths))
+                batches.append(atlas.query(target, atlas_paths))
                 note(f"{len(batches[-1])} paths of {len(atlas):,}")
     with stages.stage("align", "placing designs on the curve") as note:
         if o.every_joint:
@@ -199,7 +210,7 @@ def _search(
             search["budget_cut_refinement"] = iterations < o.refine_settings.iterations
             note(f"{len(rows)} designs, {iterations} iterations, "
                  f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
-        for _ in range(o.rounds - 1):
+        for _ in range(rounds - 1):
             with stages.stage("round", "searching around the best designs") as note:
                 nearby = around(candidates, o.around, o.around_copies, o.around_spread,
                                 o.seed + len(candidates))  # fmt: skip
