@@ -55,6 +55,7 @@ from .stages import Stages
 
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
+FAILURES_PER_TOPOLOGY = 2  # designs of one topology tried before the next topology
 
 
 @dataclass(frozen=True)
@@ -257,14 +258,20 @@ def _deliver(
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
-        found, tried = None, 0
-        for row in order[: o.attempts]:
+        found, tried, failed = None, 0, {}
+        for row in order:
+            # Later rounds fill the top of the ranking with near copies of a few designs: a
+            # topology that failed twice is not tried again.
+            key = topology_key(batch, int(row))
+            if failed.get(key, 0) >= FAILURES_PER_TOPOLOGY:
+                continue
             tried += 1
             mech = to_mechanism(batch, int(row), frame, o.units)
             origin = SOURCES[candidates.source[row]]
             found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin})
-            if found:
+            if found or tried == o.attempts:
                 break
+            failed[key] = failed.get(key, 0) + 1
         if found is None:
             raise NoDesign(f"none of the best {tried} designs passed validation and MuJoCo")
         note(f"{found.mechanism.n_nodes} joints, {found.export.layers} layers, passed "
