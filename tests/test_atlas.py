@@ -13,11 +13,11 @@ from linkd.validator import validate
 
 @pytest.fixture(scope="module")
 def atlas():
-    return build(300, seed=5)
+    return build(200, seed=5)
 
 
 def test_build_is_deterministic_and_indexes_moving_joints(atlas):
-    again = build(300, seed=5)
+    again = build(200, seed=5)
     for name in ("positions", "fixed", "links", "mechanism", "joint", "shape"):
         assert np.array_equal(getattr(atlas, name), getattr(again, name)), name
     assert len(atlas) > len(atlas.positions)  # several paths per mechanism on average
@@ -73,8 +73,8 @@ def test_design_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atl
     curve = tmp_path / "curve.csv"
     write_curve(curve, 30.0 * resample(end_effector_path(from_graph(pool[1]), 600)[0], 150))
     atlas.save(tmp_path / "atlas.npz")
-    opts = options(atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=64, rounds=2,
-                   around=2, around_copies=4, candidates=8)  # fmt: skip
+    opts = options(atlas=True, atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=32,
+                   rounds=2, around=2, around_copies=4, candidates=4, rotations=1)  # fmt: skip
     outcome = design(curve, tmp_path / "out", opts, proposer=pool_proposer(pool), show=False)
     search = outcome.report["search"]
     assert outcome.design is not None and outcome.design.measures.chamfer < 0.05
