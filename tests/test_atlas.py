@@ -1,12 +1,15 @@
 """The atlas: built deterministically, stored and read back whole, and it finds the
 mechanisms whose paths look like a target."""
 
+import time
+
 import numpy as np
 import pytest
 
 from linkd.cli import main
 from linkd.design.atlas import build, load
-from linkd.design.propose import place
+from linkd.design.propose import SOURCES, place
+from linkd.design.refine import RefineSettings
 from linkd.errors import InputError
 from linkd.validator import validate
 
@@ -60,26 +63,33 @@ def test_atlas_build_command(tmp_path, capsys):
     assert main(["atlas", "build", "--out", str(tmp_path / "no" / "a.npz"), "--count", "5"]) == 2
 
 
-def test_design_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atlas, tmp_path):
+BRIEF = RefineSettings(iterations=6, ordered_iterations=2, angles=64)
+
+
+def test_search_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atlas, tmp_path):
     from test_design import options, pool_proposer
 
-    from linkd.curves import resample, write_curve
-    from linkd.design.pipeline import design
+    from linkd.curves import normalise, resample
+    from linkd.design.pipeline import _search
     from linkd.design.select import end_effector_path
+    from linkd.design.stages import Stages
     from linkd.generator import GeneratorSettings, generate
     from linkd.graph import from_graph
 
     pool = generate(8, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
-    curve = tmp_path / "curve.csv"
-    write_curve(curve, 30.0 * resample(end_effector_path(from_graph(pool[1]), 600)[0], 150))
+    target = normalise(resample(end_effector_path(from_graph(pool[1]), 600)[0], 200))[0]
     atlas.save(tmp_path / "atlas.npz")
     opts = options(atlas=True, atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=32,
-                   rounds=2, around=2, around_copies=4, candidates=4, rotations=1)  # fmt: skip
-    outcome = design(curve, tmp_path / "out", opts, proposer=pool_proposer(pool), show=False)
-    search = outcome.report["search"]
-    assert outcome.design is not None and outcome.design.measures.chamfer < 0.05
-    assert set(search["sources"]) >= {"model", "atlas"}
+                   rounds=2, around=2, around_copies=3, candidates=4, rotations=1,
+                   refine_count=6, refine_settings=BRIEF)  # fmt: skip
+    search: dict = {}
+    found = _search(target, opts, pool_proposer(pool), Stages(False), time.monotonic(), search)
+    assert set(search["sources"]) == {"model", "atlas", "round 2"}
     assert search["sources"]["atlas"]["placed"] > 0
-    assert search["found_by"] in search["sources"]
-    for figures in search["sources"].values():
+    for name, figures in search["sources"].items():
+        assert np.sum(found.source == SOURCES.index(name)) == figures["placed"]
         assert figures["refined"] <= figures["placed"]
+    # Refinement and the later round only improve on what was placed.
+    refined = min(f["best_refined"] for f in search["sources"].values() if f["best_refined"])
+    assert refined <= min(f["best_placed"] for f in search["sources"].values()) + 1e-9
+    assert np.min(found.chamfer) < 0.02  # the curve is one of the pool's paths
