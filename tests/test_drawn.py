@@ -47,3 +47,15 @@ def test_jitter_is_averaged_and_smoothing_is_an_option():
 def test_a_clean_curve_is_read_as_it_is():
     clean = _clean()
     assert chamfer(read_target(clean, 200), clean) < 0.002
+
+
+def test_bad_search_options_exit_2_and_write_nothing(tmp_path, monkeypatch, capsys):
+    from linkd.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    curve = tmp_path / "c.csv"
+    curve.write_text("\n".join(f"{x},{y}" for x, y in _clean(40)))
+    for option in (["--smooth", "2"], ["--rounds", "0"], ["--atlas", "missing.npz"]):
+        assert main(["design", str(curve), *option]) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    assert [p.name for p in tmp_path.iterdir()] == ["c.csv"]
