@@ -55,6 +55,25 @@ class LinkageBatch:
             batch.end_effector[row] = m.end_effector
         return batch
 
+    def sub_mechanisms(self, rows: np.ndarray, joints: np.ndarray) -> LinkageBatch:
+        """For each pair (rows[i], joints[i]), the linkage of that joint and the joints it hangs
+        on (down to the crank and the ground), with that joint as end effector. In a linkage of
+        dyadic order (parents first, as decoded from graph matrices) this is a valid linkage
+        again, and the chosen joint comes last."""
+        needed = ancestors(self.adjacency[rows], joints)
+        order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
+        pick = order[:, :, None]
+        adjacency = np.take_along_axis(self.adjacency[rows], pick, 1)
+        adjacency = np.take_along_axis(adjacency, order[:, None, :], 2)
+        valid = np.take_along_axis(needed, order, 1)
+        return LinkageBatch(
+            np.take_along_axis(self.positions[rows], pick, 1),
+            np.take_along_axis(self.fixed[rows], order, 1) & valid,
+            valid,
+            adjacency & valid[:, :, None] & valid[:, None, :],
+            valid.sum(1) - 1,
+        )
+
     def subset(self, index: np.ndarray | slice) -> LinkageBatch:
         return LinkageBatch(
             self.positions[index],
@@ -63,3 +82,16 @@ class LinkageBatch:
             self.adjacency[index],
             self.end_effector[index],
         )
+
+
+def ancestors(adjacency: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """(K, N) the joints each of `joints` (K,) hangs on, itself and the motor included, in
+    linkages of dyadic order (parents come first) with links `adjacency` (K, N, N)."""
+    n = adjacency.shape[1]
+    parents = np.tril(adjacency, -1)
+    needed = np.zeros((len(joints), n), bool)
+    needed[np.arange(len(joints)), joints] = True
+    needed[:, :2] = True  # the motor
+    for _ in range(n):  # each pass adds the parents of what is needed
+        needed |= (parents & needed[:, :, None]).any(1)
+    return needed

@@ -38,7 +38,7 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
         return graphs[np.resize(np.arange(len(graphs)), len(curves) * per_curve)]
 
     lines = []
-    options = DesignOptions(candidates=6, refine=False, formats=frozenset({"mjcf"}))
+    options = DesignOptions(candidates=6, refine=False, formats=frozenset({"mjcf"}), atlas=False)
     results = run_bench(files, options, proposer, say=lines.append)
     assert len(results["curves"]) == 2 and len(lines) == 2
     total = results["total"]
@@ -47,3 +47,5 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
         assert 0 <= row["chamfer"] < 1 and 0 <= row["chamfer_200"] < 1
         assert 5 <= row["nodes"] <= 6 and row["seconds"] > 0
     assert "verified        100.0%" in summary_table(total)
+    assert total["found_by"] == {"model": 2}  # the only source here
+    assert total["stages"]["model, placed"] >= total["stages"]["+ atlas, placed"]

@@ -64,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "between the ends)")  # fmt: skip
     d.add_argument("--only", choices=("open", "closed"), help="only the open or closed curves")
     d.add_argument("--timed", action="store_true", help="rows equally spaced in time")
+    from linkd.commands.design import add_search_options
+
+    add_search_options(d)
     d.set_defaults(run=design)
 
 

@@ -87,7 +87,37 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "auto (from the gap between its ends), closed or open")  # fmt: skip
     p.add_argument("--timed", action="store_true",
                    help="the rows are equally spaced in time at constant crank speed")  # fmt: skip
+    add_search_options(p)
     p.set_defaults(run=run)
+
+
+def add_search_options(p: argparse.ArgumentParser) -> None:
+    """The wider search of drawn shapes (issue 9), shared with `linkd bench design`."""
+    p.add_argument("--atlas", default="shipped",
+                   help="atlas of mechanisms to look the shape up in: a file from "
+                        "`linkd atlas build`, 'shipped' (default) or 'none'")  # fmt: skip
+    p.add_argument("--rounds", type=int, default=None,
+                   help="refinement rounds, each after the first searching around the best "
+                        "designs (default: from the time budget)")  # fmt: skip
+    p.add_argument("--smooth", type=float, default=0.0,
+                   help="smooth a shaky drawing: Gaussian width as a fraction of the curve's "
+                        "length (e.g. 0.005; default 0, the curve as drawn)")  # fmt: skip
+
+
+def search_options(args: argparse.Namespace) -> dict:
+    """DesignOptions fields of the search options, checked (InputError when out of range)."""
+    if args.rounds is not None and args.rounds < 1:
+        raise InputError(f"--rounds must be at least 1, got {args.rounds}")
+    if not 0 <= args.smooth <= 0.1:
+        raise InputError(f"--smooth must be between 0 and 0.1, got {args.smooth}")
+    if args.atlas not in ("shipped", "none") and not Path(args.atlas).is_file():
+        raise InputError(f"--atlas: {args.atlas}: no such file")
+    fields = {"atlas": args.atlas != "none", "smooth": args.smooth}
+    if args.atlas not in ("shipped", "none"):
+        fields["atlas_path"] = args.atlas
+    if args.rounds is not None:
+        fields["rounds"] = args.rounds
+    return fields
 
 
 def run(args: argparse.Namespace) -> int:
@@ -141,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         constraints=limits,
         path=args.path,
         timed=args.timed,
+        **search_options(args),
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:

@@ -34,6 +34,7 @@ from linkd.errors import InputError
 
 from .pipeline import DesignOptions, design
 from .propose import Proposer
+from .search import search_width
 from .select import end_effector_path
 
 SETUPS = ("plain", "user", "constrained", "no-motor")
@@ -168,6 +169,8 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "deviation": None,
         "timing_error": figures.get("timing_error"),
         "seconds": seconds,
+        "found_by": outcome.report["search"].get("found_by"),
+        "sources": outcome.report["search"].get("sources", {}),
     }
     if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
         points, _ = read_path(file, "open")
@@ -208,6 +211,9 @@ def totals(rows: list[dict]) -> dict:
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
         **_held(rows),
+        "found_by": {name: sum(r["found_by"] == name for r in rows)
+                     for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
+        "stages": stages(rows),
     }
 
 
@@ -217,6 +223,29 @@ def _held(rows: list[dict]) -> dict:
     if not any("constraints_hold" in r for r in rows):
         return {}
     return {"constraints_held_rate": float(np.mean(checked)) if checked else None}
+
+
+def stages(rows: list[dict]) -> dict:
+    """Mean over the curves of the best error each stage reached (normalised frame, the
+    refinement's own measure): placed candidates from the proposer, from the proposer and the
+    atlas, then refined, then after the later rounds. A curve without a figure for a stage
+    (the source offered nothing) counts with the stage before."""
+    columns: dict[str, list[float]] = {}
+    for row in rows:
+        sources = row.get("sources") or {}
+        best = np.inf
+
+        def reached(name: str, value) -> None:
+            nonlocal best
+            best = min(best, np.inf if value is None else value)
+            columns.setdefault(name, []).append(best)
+
+        reached("model, placed", sources.get("model", {}).get("best_placed"))
+        reached("+ atlas, placed", sources.get("atlas", {}).get("best_placed"))
+        refined = [sources.get(name, {}).get("best_refined") for name in ("model", "atlas")]
+        reached("+ refinement", min((v for v in refined if v is not None), default=None))
+        reached("+ later rounds", sources.get("round 2", {}).get("best_refined"))
+    return {name: float(np.mean(v)) for name, v in columns.items() if np.isfinite(v).all()}
 
 
 def _fmt(value, spec: str) -> str:
@@ -232,6 +261,7 @@ def _line(row: dict) -> str:
         f"(200 pts {_fmt(row['chamfer_200'], '.4f'):>6})",
         f"joints {_fmt(row['nodes'], 'd'):>2}",
         f"{row['seconds']:6.1f} s",
+        f"from {row['found_by'] or '-'}",
     ]
     if row.get("reason"):
         cells.append(row["reason"])
@@ -259,6 +289,8 @@ def summary_table(total: dict) -> str:
                          f"median {_fmt(t['timing_error_median'], '.4f')}"),
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
+        ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
+        ("stages", ", ".join(f"{k} {v:.4f}" for k, v in t["stages"].items()) or "-"),
     ]  # fmt: skip
     if "constraints_held_rate" in t:
         lines.append(("constraints", f"{_fmt(t['constraints_held_rate'], '.1%')} of delivered "
@@ -279,19 +311,24 @@ def write_json(
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
                 "refine": options.refine, "proposer": options.proposer,
-                "setup": setup, "path": options.path, "timed": options.timed}  # fmt: skip
+                "setup": setup, "path": options.path, "timed": options.timed,
+                "atlas": options.atlas and (options.atlas_path or "shipped"),
+                "rounds": search_width(options.time_budget, options.rounds,
+                                       options.atlas_paths)[0]}  # fmt: skip
     write_atomic(path, json.dumps({"options": settings, **results}, indent=2) + "\n")
 
 
 def main(args) -> int:
     """`linkd bench design`: parsed arguments in, figures printed (and written as JSON)."""
+    from linkd.commands.design import search_options
     from linkd.sample import load_model
 
     from .propose import model_proposer, random_proposer
 
     options = DesignOptions(candidates=args.candidates, strategy=args.strategy, seed=args.seed,
                             time_budget=args.time_budget, refine=args.refine,
-                            proposer=args.proposer, path=args.path, timed=args.timed)  # fmt: skip
+                            proposer=args.proposer, path=args.path, timed=args.timed,
+                            **search_options(args))  # fmt: skip
     if args.proposer == "random":
         proposer = random_proposer()
     else:

@@ -69,7 +69,7 @@ def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candid
     placed = LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
     score = np.nan_to_num(chamfer.numpy(), nan=np.inf)
     order = np.argsort(score, kind="stable")
-    return Candidates(placed.subset(order), score[order])
+    return Candidates(placed.subset(order), score[order], candidates.source[order])
 
 
 def _turn(points: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
@@ -117,7 +117,8 @@ def rank(candidates: Candidates, c: Constraints) -> Candidates:
     score = candidates.chamfer + RANK_WEIGHT * violation(candidates.batch, c)
     order = np.argsort(score, kind="stable")
     ranges = None if candidates.ranges is None else candidates.ranges[order]
-    return Candidates(candidates.batch.subset(order), candidates.chamfer[order], ranges)
+    return Candidates(candidates.batch.subset(order), candidates.chamfer[order],
+                      candidates.source[order], candidates.refined[order], ranges)  # fmt: skip
 
 
 def tightened(settings: RefineSettings, c: Constraints) -> RefineSettings:

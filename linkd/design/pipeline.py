@@ -1,9 +1,10 @@
 """The `linkd design` run: a user's curve to a verified, exported mechanism that traces it.
 
 Stages, each timed and shown on a terminal:
-1. read     the curve file; resample it by arc length and normalise it (centroid 0, RMS radius
-            1), remembering the similarity back to the user's frame;
-2. propose  LinkD designs for the target and its turned and mirrored copies;
+1. read     the curve file; resample it by arc length, filtered (drawn.py), and normalise it
+            (centroid 0, RMS radius 1), remembering the similarity back to the user's frame;
+2. propose  LinkD designs for the target and its turned and mirrored copies, and the
+            mechanisms of the atlas whose paths have the target's shape (atlas.py);
 3. align    offer each valid design's sub-mechanisms too (any moving joint as end effector,
             with the joints it hangs on), keep those whose shape is most like the target, place
             each on the target by its best similarity, rank by Chamfer;
@@ -34,29 +35,21 @@ import numpy as np
 from linkd import __version__
 from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints, binding, check, describe, no_design
-from linkd.curves import read_path
+from linkd.curves import normalise, read_path
 from linkd.outdir import staged_output
-from linkd.validator import validate
 
-from .constrained import pin, prune, rank, screen, tightened
+from .constrained import screen
+from .drawn import read_target
 from .output import Delivered, deliver, finish, summary
-from .propose import (
-    Candidates,
-    Proposer,
-    model_proposer,
-    place,
-    propose,
-    random_proposer,
-    sub_mechanisms,
-)
-from .refine import RefineSettings, refine, single_thread
-from .select import diverse_best, to_mechanism, topology_key
+from .propose import SOURCES, Candidates, Proposer
+from .refine import RefineSettings, single_thread
+from .search import N_POINTS, NoDesign, search
+from .select import to_mechanism, topology_key
 from .stages import Stages
-from .stroke import Goal, make_goal, place_stroke
-from .stroke_refine import refine_stroke
+from .stroke import Goal, make_goal
 
-N_POINTS = 200  # points of the normalised target the model and the refinement see
 DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
+FAILURES_PER_TOPOLOGY = 2  # designs of one topology tried before the next topology
 
 
 @dataclass(frozen=True)
@@ -83,10 +76,16 @@ class DesignOptions:
     # open paths and timing (issue 10)
     path: str = "auto"  # "auto", "closed" or "open": what the curve is (see linkd.paths)
     timed: bool = False  # rows equally spaced in time at constant crank speed
-
-
-class NoDesign(Exception):
-    """No candidate became a valid, verified design."""
+    # The atlas (issue 9): paths looked up by shape next to the proposer's designs.
+    atlas: bool = True
+    atlas_path: str | None = None  # None: the shipped atlas
+    atlas_paths: int | None = None  # paths looked up, nearest first (None: from the budget)
+    smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
+    rounds: int | None = None  # refinement rounds, each after the first searching around the
+    # best so far (None: from the budget)
+    around: int = 4  # designs (of distinct topologies) searched around
+    around_copies: int = 16  # jittered copies of each
+    around_spread: float = 0.1  # their joints move by this much (normalised frame)
 
 
 @dataclass
@@ -116,18 +115,24 @@ def design(
     with stages.stage("read", "reading the curve") as note:
         points, closed = read_path(curve_path, o.path)
         goal, frame = make_goal(points, closed, o.timed, N_POINTS)
+        if closed and not o.timed:  # a drawn loop, read as drawn.py says
+            target, frame = normalise(read_target(points, N_POINTS, o.smooth))
+            goal = Goal(target, True, False)
         kind = ("closed" if closed else "open") + (", timed" if o.timed else "")
         note(f"{len(points)} points from {Path(curve_path).name}, {kind} path")
-    search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
+    report_search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}
     if o.constraints:
-        search["constraints"] = o.constraints.to_dict()
+        report_search["constraints"] = o.constraints.to_dict()
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
     try:
         with single_thread(), staged_output(out, force) as stage:
-            candidates = _search(goal, frame, o, proposer, stages, start, search)
+            inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
+            deadline = start + o.time_budget - DELIVERY_RESERVE
+            candidates = search(goal, inner, o, proposer, stages, deadline, report_search)
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
                                                      source)  # fmt: skip
+            report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
                 "curve": {
@@ -140,7 +145,7 @@ def design(
                 },
                 "design": summary(found),
                 **({"constraints": [m.to_dict() for m in measured]} if measured else {}),
-                "search": search,
+                "search": report_search,
                 "alternatives": alternatives,
                 "timings": {},
             }
@@ -151,91 +156,9 @@ def design(
             found.folder = Path(out)
     except NoDesign as reason:
         stages.say(f"[red]no design[/]: {reason}")
-        return Outcome(None, None, {"search": search, "reason": str(reason)}, [])
+        return Outcome(None, None, {"search": report_search, "reason": str(reason)}, [])
     report["timings"] = _timings(stages, start)
     return Outcome(Path(out), found, report, alternatives)
-
-
-def _search(
-    goal: Goal,
-    frame,
-    o: DesignOptions,
-    proposer: Proposer | None,
-    stages: Stages,
-    start: float,
-    search: dict,
-) -> Candidates:
-    """Propose, place and refine; each candidate's `chamfer` is its latest curve error (on an
-    open or timed target: its stroke's Chamfer distance, or its timing error)."""
-    stroke = not goal.closed or goal.timed
-    target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
-    inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
-    with stages.stage("propose", f"sampling {o.candidates} designs") as note:
-        search["proposer"] = o.proposer
-        if proposer is None and o.proposer == "random":
-            proposer = random_proposer()
-        elif proposer is None:
-            from linkd.sample import load_model
-
-            proposer = model_proposer(load_model(o.model), o.strategy)
-            search["model"] = o.model or "shipped"
-        graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
-        note(f"{len(graphs)} designs")
-    with stages.stage("align", "placing designs on the curve") as note:
-        batch = LinkageBatch.from_graphs(graphs)
-        search["proposed"], search["valid"] = len(graphs), int(validate(batch).valid.sum())
-        if o.every_joint:
-            batch = sub_mechanisms(batch, target, o.placed, inner.max_joints)
-        batch = prune(batch, inner.max_joints)
-        if len(batch) == 0:
-            candidates = Candidates(batch, np.zeros(0))
-        else:
-            candidates = place_stroke(batch, goal) if stroke else place(batch, target)
-        if inner.motor_at is not None and not stroke:
-            candidates = pin(candidates, target, np.array(inner.motor_at))
-        if inner:
-            candidates = rank(candidates, inner)
-        search["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
-        best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
-        note(f"{search['valid']} valid, {len(candidates)} placed{best}")
-    if len(candidates) == 0 and inner.max_joints is not None:
-        raise NoDesign(f"no design has at most {inner.max_joints} joints: none of the "
-                       f"{len(graphs)} sampled designs offers a valid one that small")  # fmt: skip
-    if len(candidates) == 0:
-        raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
-    score = candidates.chamfer.copy()
-    search["refined"] = 0
-    if o.refine:
-        rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
-                                     o.refine_count, o.per_topology))  # fmt: skip
-        deadline = start + o.time_budget - DELIVERY_RESERVE
-        total = o.refine_settings.iterations
-        with stages.stage("refine", f"refining {len(rows)} designs") as note:
-            def progress(done: int, best: float) -> None:
-                stages.progress(f"refining {len(rows)} designs: iteration {done} of {total}, "
-                                f"best Chamfer {best:.4f}")  # fmt: skip
-
-            settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-            subset = candidates.batch.subset(rows)
-            if stroke:
-                result, ranges = refine_stroke(subset, candidates.ranges[rows], goal, settings,
-                                               deadline)  # fmt: skip
-                candidates.ranges[rows[result.ok]] = ranges[result.ok]
-            else:
-                result = refine(subset, target, settings, deadline, constraints=inner or None,
-                                progress=progress)  # fmt: skip
-            ok = result.ok
-            candidates.batch.positions[rows[ok]] = result.positions[ok]
-            score[rows[ok]] = result.chamfer[ok]
-            score[rows[~ok]] = np.inf  # never within the refinement's limits: tried last
-            search["refined"] = int(ok.sum())
-            search["refine_iterations"] = result.iterations
-            search["budget_cut_refinement"] = result.iterations < o.refine_settings.iterations
-            note(f"{result.iterations} iterations, best Chamfer {np.nanmin(score):.4f}")
-    candidates.chamfer = score
-    if goal.closed:  # a closed timed path: its phase is measured again on delivery
-        candidates.ranges = None
-    return candidates
 
 
 def _deliver(
@@ -259,15 +182,25 @@ def _deliver(
             raise NoDesign(binding(screened, c, o.units))
         order = order[feasible[order]]
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
-        found, tried, measured, unmet = None, 0, [], []
-        for row in order[: o.attempts]:
+        found, tried, measured, unmet, failed = None, 0, [], [], {}
+        for row in order:
+            # Later rounds fill the top of the ranking with near copies of a few designs: a
+            # topology that failed twice is not tried again.
+            key = topology_key(batch, int(row))
+            if failed.get(key, 0) >= FAILURES_PER_TOPOLOGY:
+                continue
             tried += 1
             mech, measured = _checked(batch, int(row), frame, o, _range(candidates, row))
             if mech is None:  # within the screening's sampling, but not exactly
                 unmet.append(next(m for m in measured if not m.holds))
-                continue
-            found = deliver(mech, points, stage, o.formats, source, o.timed)
-            if found:
+            else:
+                origin = SOURCES[candidates.source[row]]
+                found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
+                                o.timed)  # fmt: skip
+                if found:
+                    break
+                failed[key] = failed.get(key, 0) + 1
+            if tried == o.attempts:
                 break
         if found is None and unmet and len(unmet) == tried:
             raise NoDesign(f"{no_design(unmet[0], o.units)}; in the best, "

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from linkd.align import align
-from linkd.batch import LinkageBatch
+from linkd.batch import LinkageBatch, ancestors
 from linkd.design.refine import resample_closed
 from linkd.geometry import rotation
 from linkd.sample import MOVES, spread
@@ -33,10 +33,35 @@ class Candidates:
 
     batch: LinkageBatch  # positions in the target's normalised frame
     chamfer: np.ndarray  # (K,) Chamfer distance of each placed path to the target
+    source: np.ndarray | None = None  # (K,) where each came from: an index into SOURCES
+    refined: np.ndarray | None = None  # (K,) bool, whether refinement has had it (default none)
     ranges: np.ndarray | None = None  # (K, 2) crank ranges [a, b] on an open or timed target
+
+    def __post_init__(self) -> None:
+        if self.source is None:
+            self.source = np.zeros(len(self.chamfer), int)
+        if self.refined is None:
+            self.refined = np.zeros(len(self.chamfer), bool)
 
     def __len__(self) -> int:
         return len(self.chamfer)
+
+
+def merged(first: Candidates, second: Candidates) -> Candidates:
+    """The candidates of both, first's then second's (not re-sorted)."""
+    return Candidates(joined([first.batch, second.batch]),
+                      np.concatenate([first.chamfer, second.chamfer]),
+                      np.concatenate([first.source, second.source]),
+                      np.concatenate([first.refined, second.refined]))  # fmt: skip
+
+
+SOURCES = ("model", "atlas", "round 2")  # the proposer, the atlas, the search around the best
+
+
+def joined(batches: list[LinkageBatch]) -> LinkageBatch:
+    """One batch of the linkages of several (all padded to the same number of joints)."""
+    fields = ("positions", "fixed", "valid", "adjacency", "end_effector")
+    return LinkageBatch(*(np.concatenate([getattr(b, f) for b in batches]) for f in fields))
 
 
 def augmented(target: np.ndarray, rotations: int) -> np.ndarray:
@@ -104,45 +129,20 @@ def sub_mechanisms(
     moving = result.valid[:, None] & batch.valid & ~batch.fixed & (spread(paths).numpy() > MOVES)
     moving[:, :2] = False  # the crank tip only turns in a circle
     rows, joints = np.nonzero(moving)
-    needed = _needed(batch.adjacency[rows], joints)
     if max_joints is not None:
-        small = needed.sum(1) <= max_joints
-        rows, joints, needed = rows[small], joints[small], needed[small]
+        small = ancestors(batch.adjacency[rows], joints).sum(1) <= max_joints
+        rows, joints = rows[small], joints[small]
     if len(rows) == 0:
         return batch  # nothing valid moves: `place` finds no candidate
     if len(rows) > keep:
         curves = resample_closed(paths[rows, joints].double(), 64)
-        gap = _descriptor(curves) - _descriptor(torch.as_tensor(target)[None])
+        gap = descriptor(curves) - descriptor(torch.as_tensor(target)[None])
         best = torch.topk(gap.norm(dim=1), keep, largest=False).indices.sort().values.numpy()
-        rows, joints, needed = rows[best], joints[best], needed[best]
-    order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
-    pick = order[:, :, None]
-    adjacency = np.take_along_axis(batch.adjacency[rows], pick, 1)
-    adjacency = np.take_along_axis(adjacency, order[:, None, :], 2)
-    valid = np.take_along_axis(needed, order, 1)
-    return LinkageBatch(
-        np.take_along_axis(batch.positions[rows], pick, 1),
-        np.take_along_axis(batch.fixed[rows], order, 1) & valid,
-        valid,
-        adjacency & valid[:, :, None] & valid[:, None, :],
-        valid.sum(1) - 1,  # the chosen joint comes last among those it needs
-    )
+        rows, joints = rows[best], joints[best]
+    return batch.sub_mechanisms(rows, joints)
 
 
-def _needed(adjacency: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """(K, N) the joints each of `joints` hangs on, itself and the motor included, in linkages
-    of dyadic order (parents come first) with links `adjacency` (K, N, N)."""
-    n = adjacency.shape[1]
-    parents = np.tril(adjacency, -1)
-    needed = np.zeros((len(joints), n), bool)
-    needed[np.arange(len(joints)), joints] = True
-    needed[:, :2] = True  # the motor
-    for _ in range(n):  # each pass adds the parents of what is needed
-        needed |= (parents & needed[:, :, None]).any(1)
-    return needed
-
-
-def _descriptor(curves: torch.Tensor) -> torch.Tensor:
+def descriptor(curves: torch.Tensor) -> torch.Tensor:
     """(B, 2 * HARMONICS) Fourier magnitudes of closed curves (B, M, 2) equally spaced by arc
     length, scaled by the first harmonics: unchanged by translation, scale, rotation, start
     point, and (harmonics k and -k paired in sorted order) reflection and direction."""
@@ -152,16 +152,18 @@ def _descriptor(curves: torch.Tensor) -> torch.Tensor:
     return pairs / pairs[:, :2].sum(1, keepdim=True).clamp_min(1e-12)
 
 
-def place(batch: LinkageBatch, target: np.ndarray) -> Candidates:
-    """Keep the valid linkages of `batch` and move each onto the target by its best similarity."""
+def place(batch: LinkageBatch, target: np.ndarray, source: np.ndarray | None = None) -> Candidates:
+    """Keep the valid linkages of `batch` and move each onto the target by its best similarity.
+    source: (B,) index into SOURCES of each linkage (default: all from the model)."""
+    source = np.zeros(len(batch), int) if source is None else np.asarray(source)
     result = validate(batch, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
     batch, paths = batch.subset(keep), paths[keep]
     if len(keep) == 0:
-        return Candidates(batch, np.zeros(0))
+        return Candidates(batch, np.zeros(0), source[keep])
     even = resample_closed(torch.as_tensor(paths), len(target)).numpy()
     similarity, chamfer = align(even, target)
     batch.positions = similarity.apply(batch.positions)
     order = np.argsort(chamfer, kind="stable")
-    return Candidates(batch.subset(order), chamfer[order])
+    return Candidates(batch.subset(order), chamfer[order], source[keep][order])

@@ -88,7 +88,7 @@ def place_stroke(batch: LinkageBatch, goal: Goal) -> Candidates:
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
     batch, paths = batch.subset(keep), torch.as_tensor(paths[keep], dtype=torch.float32)
     if len(keep) == 0:
-        return Candidates(batch, np.zeros(0), np.zeros((0, 2)))
+        return Candidates(batch, np.zeros(0), ranges=np.zeros((0, 2)))
     target = torch.as_tensor(goal.samples(MATCH_POINTS), dtype=torch.float32)
     joints = torch.as_tensor(batch.positions, dtype=torch.float32)
     found = [_search(paths[c], joints[c], target, goal) for c in _chunks(len(keep))]
@@ -103,7 +103,7 @@ def place_stroke(batch: LinkageBatch, goal: Goal) -> Candidates:
     crank = crank_ranges(ranges[:, 0].numpy(), ranges[:, 1].numpy())
     score = stroke_scores(batch, crank, goal)
     order = np.argsort(score, kind="stable")
-    return Candidates(batch.subset(order), score[order], crank[order])
+    return Candidates(batch.subset(order), score[order], ranges=crank[order])
 
 
 def crank_ranges(start: np.ndarray, span: np.ndarray) -> np.ndarray:

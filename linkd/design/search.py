@@ -1,0 +1,208 @@
+"""The search of a `linkd design` run: propose, look up, place and refine candidate designs.
+
+Candidates come from the proposer (LinkD, or the curve-blind generator) and from the atlas of
+precomputed mechanisms; each valid one offers its sub-mechanisms, is placed on the target by
+its best similarity (or, on an open or timed target, its best sub-arc of crank angles too),
+and the best few are refined, in rounds that search around the best so far on closed loops.
+The designer's constraints (in the target's normalised frame) prune, pin, rank and bound the
+candidates throughout.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import cache
+
+import numpy as np
+
+from linkd.batch import LinkageBatch
+from linkd.validator import validate
+
+from .atlas import DEFAULT_PATH, Atlas
+from .atlas import load as load_atlas
+from .constrained import pin, rank, tightened
+from .propose import (
+    SOURCES,
+    Candidates,
+    Proposer,
+    joined,
+    merged,
+    model_proposer,
+    place,
+    propose,
+    random_proposer,
+    sub_mechanisms,
+)
+from .refine import RefineSettings, refine
+from .rounds import around
+from .select import diverse_best
+from .stages import Stages
+from .stroke import Goal, place_stroke
+from .stroke_refine import refine_stroke
+
+N_POINTS = 200  # points of the normalised target the model and the refinement see
+
+
+class NoDesign(Exception):
+    """No candidate became a valid, verified design."""
+
+
+def search_width(time_budget: float, rounds: int | None, atlas_paths: int | None):
+    """Refinement rounds and atlas paths for the time budget, where not given: two rounds and
+    1024 paths for the default 30 s, one round and 1024 paths more for every further 30 s. (The
+    budget's deadline still stops refinement early on a slow or busy machine.)"""
+    steps = max(1, round(time_budget / 30))
+    return rounds or 1 + steps, atlas_paths or 1024 * steps
+
+
+def search(goal: Goal, inner, o, proposer: Proposer | None, stages: Stages, deadline: float,
+           report: dict) -> Candidates:  # fmt: skip
+    """Propose, place and refine (`o`: the DesignOptions; `inner`: the constraints in the
+    target's frame); each candidate's `chamfer` is its latest curve error (on an open or timed
+    target: its stroke's Chamfer distance, or its timing error). Fills `report`."""
+    stroke = not goal.closed or goal.timed
+    target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
+    rounds, atlas_paths = search_width(o.time_budget, o.rounds, o.atlas_paths)
+    rounds = 1 if stroke else rounds  # searching around the best works on closed loops
+    report["rounds"] = rounds
+    with stages.stage("propose", f"sampling {o.candidates} designs") as note:
+        report["proposer"] = o.proposer
+        if proposer is None and o.proposer == "random":
+            proposer = random_proposer()
+        elif proposer is None:
+            from linkd.sample import load_model
+
+            proposer = model_proposer(load_model(o.model), o.strategy)
+            report["model"] = o.model or "shipped"
+        graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
+        note(f"{len(graphs)} designs")
+    batches = [LinkageBatch.from_graphs(graphs)]
+    if o.atlas and not stroke:
+        with stages.stage("atlas", "looking the shape up in the atlas") as note:
+            atlas = _atlas(o.atlas_path)
+            if atlas is None:
+                note("no atlas (build one with `linkd atlas build`)")
+            else:
+                batches.append(atlas.query(target, atlas_paths))
+                note(f"{len(batches[-1])} paths of {len(atlas):,}")
+    with stages.stage("align", "placing designs on the curve") as note:
+        report["proposed"] = len(graphs)
+        report["valid"] = int(validate(batches[0]).valid.sum())
+        if o.every_joint:
+            batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints)
+        source = np.concatenate([np.full(len(b), k) for k, b in enumerate(batches)])
+        batch = joined(batches)
+        if inner.max_joints is not None:  # the sub-mechanisms were chosen within it already
+            keep = np.flatnonzero(batch.valid.sum(1) <= inner.max_joints)
+            batch, source = batch.subset(keep), source[keep]
+        if len(batch) == 0:
+            candidates = Candidates(batch, np.zeros(0))
+        elif stroke:
+            candidates = place_stroke(batch, goal)
+        else:
+            candidates = place(batch, target, source)
+        if inner.motor_at is not None and not stroke:
+            candidates = pin(candidates, target, np.array(inner.motor_at))
+        if inner:
+            candidates = rank(candidates, inner)
+        report["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
+        best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
+        note(f"{report['valid']} valid, {len(candidates)} placed{best}")
+    if len(candidates) == 0 and inner.max_joints is not None:
+        raise NoDesign(f"no design has at most {inner.max_joints} joints: none of the "
+                       f"{len(graphs)} sampled designs offers a valid one that small")  # fmt: skip
+    if len(candidates) == 0:
+        raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
+    placed = candidates.chamfer.copy()
+    candidates.chamfer = candidates.chamfer.copy()
+    report["refined"] = 0
+    if o.refine:
+        settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
+        refine_rows = _refiner(candidates, goal, target, stroke, settings, inner, deadline)
+        with stages.stage("refine", "refining the best designs") as note:
+            rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
+                                         o.refine_count, o.per_topology), int)  # fmt: skip
+            iterations = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
+            report["refine_iterations"] = iterations
+            report["budget_cut_refinement"] = iterations < settings.iterations
+            note(f"{len(rows)} designs, {iterations} iterations, "
+                 f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        for _ in range(rounds - 1):
+            with stages.stage("round", "searching around the best designs") as note:
+                nearby = around(candidates, o.around, o.around_copies, o.around_spread,
+                                o.seed + len(candidates))  # fmt: skip
+                found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
+                if inner:
+                    found = rank(found, inner)
+                first = len(candidates)
+                candidates = merged(candidates, found)
+                refine_rows = _refiner(candidates, goal, target, stroke, settings, inner,
+                                       deadline)  # fmt: skip
+                placed = np.concatenate([placed, found.chamfer])
+                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
+                                                     o.refine_count, o.refine_count), int)
+                done = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
+                note(f"{len(rows)} designs, {done} iterations, "
+                     f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
+    if goal.closed:  # a closed timed path: its phase is measured again on delivery
+        candidates.ranges = None
+    used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
+    report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
+    return candidates
+
+
+def _refiner(candidates: Candidates, goal: Goal, target: np.ndarray, stroke: bool,
+             settings: RefineSettings, inner, deadline: float) -> Callable:  # fmt: skip
+    """A function refining given rows of `candidates` in place (those never within the
+    refinement's limits get an infinite error: tried last); it returns the iterations run."""
+
+    def refine_rows(candidates: Candidates, rows: np.ndarray, progress) -> int:
+        if len(rows) == 0:
+            return 0
+        subset = candidates.batch.subset(rows)
+        if stroke:
+            result, ranges = refine_stroke(subset, candidates.ranges[rows], goal, settings,
+                                           deadline)  # fmt: skip
+            candidates.ranges[rows[result.ok]] = ranges[result.ok]
+        else:
+            result = refine(subset, target, settings, deadline, constraints=inner or None,
+                            progress=progress)  # fmt: skip
+        ok = result.ok
+        candidates.batch.positions[rows[ok]] = result.positions[ok]
+        candidates.chamfer[rows] = np.where(ok, result.chamfer, np.inf)
+        candidates.refined[rows] = True
+        return result.iterations
+
+    return refine_rows
+
+
+def _progress(stages: Stages, count: int, settings: RefineSettings) -> Callable:
+    def progress(done: int, best: float) -> None:
+        stages.progress(f"refining {count} designs: iteration {done} of {settings.iterations}, "
+                        f"best Chamfer {best:.4f}")  # fmt: skip
+
+    return progress
+
+
+@cache
+def _atlas(path: str | None) -> Atlas | None:
+    """The atlas at `path` (None: the shipped one, or None when it has not been built)."""
+    if path is None and not DEFAULT_PATH.exists():
+        return None
+    return load_atlas(path)
+
+
+def _contribution(candidates: Candidates, source: int, placed: np.ndarray) -> dict:
+    """What one source offered: its candidates placed on the target and refined, and the best
+    of each (`placed`: the errors before refinement)."""
+    mine = candidates.source == source
+    refined = candidates.chamfer[mine & candidates.refined]
+    return {"placed": int(mine.sum()),
+            "best_placed": _finite(np.min(placed[mine], initial=np.inf)),
+            "refined": len(refined),
+            "best_refined": _finite(np.min(refined, initial=np.inf))}  # fmt: skip
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None

@@ -1,0 +1,98 @@
+"""The atlas: built deterministically, stored and read back whole, and it finds the
+mechanisms whose paths look like a target."""
+
+import time
+
+import numpy as np
+import pytest
+
+from linkd.cli import main
+from linkd.design.atlas import build, load
+from linkd.design.propose import SOURCES, place
+from linkd.design.refine import RefineSettings
+from linkd.errors import InputError
+from linkd.validator import validate
+
+
+@pytest.fixture(scope="module")
+def atlas():
+    return build(200, seed=5)
+
+
+def test_build_is_deterministic_and_indexes_moving_joints(atlas):
+    again = build(200, seed=5)
+    for name in ("positions", "fixed", "links", "mechanism", "joint", "shape"):
+        assert np.array_equal(getattr(atlas, name), getattr(again, name)), name
+    assert len(atlas) > len(atlas.positions)  # several paths per mechanism on average
+    whole = atlas.batch(np.arange(len(atlas.positions)))
+    assert validate(whole).valid.all()  # every stored mechanism works once rounded
+    assert not whole.fixed[np.arange(len(whole))[atlas.mechanism], atlas.joint].any()
+    assert (atlas.joint >= 2).all()  # neither the pivot nor the crank tip
+
+
+def test_saved_atlas_reads_back_and_bad_files_are_refused(atlas, tmp_path):
+    atlas.save(tmp_path / "atlas.npz")
+    back = load(tmp_path / "atlas.npz")
+    assert back.meta == atlas.meta and np.array_equal(back.shape, atlas.shape)
+    assert [p.name for p in tmp_path.iterdir()] == ["atlas.npz"]  # no scratch file left
+    (tmp_path / "bad.npz").write_text("not an atlas")
+    with pytest.raises(InputError, match=r"bad\.npz: not a linkd atlas"):
+        load(tmp_path / "bad.npz")
+
+
+def test_a_path_of_the_atlas_is_found_first_and_placed_exactly(atlas):
+    entry = 123
+    whole = atlas.batch(atlas.mechanism[[entry]])
+    motion = validate(whole, n_angles=400, keep_motion=True).motion
+    joint = atlas.joint[entry]
+    path = np.stack([motion.x[0, joint], motion.y[0, joint]], -1)
+    turned = path @ np.array([[0.6, -0.8], [0.8, 0.6]]) * 3.0 + 5.0  # moved, turned, scaled
+    found = atlas.nearest(turned[::-1], 5)  # walked backwards too
+    same = np.flatnonzero(np.all(atlas.shape == atlas.shape[entry], axis=1))
+    assert found[0] in same
+    target = (turned - turned.mean(0)) / np.sqrt(((turned - turned.mean(0)) ** 2).sum(1).mean())
+    placed = place(atlas.query(target, 5), target)
+    assert len(placed) >= 1 and placed.chamfer[0] < 0.02
+
+
+def test_atlas_build_command(tmp_path, capsys):
+    out = tmp_path / "small.npz"
+    assert main(["atlas", "build", "--count", "40", "--seed", "1", "--out", str(out)]) == 0
+    assert load(out).meta["seed"] == 1 and "mechanisms" in capsys.readouterr().out
+    assert main(["atlas", "build", "--count", "0", "--out", str(out)]) == 2
+    assert main(["atlas", "build", "--out", str(tmp_path / "no" / "a.npz"), "--count", "5"]) == 2
+
+
+BRIEF = RefineSettings(iterations=6, ordered_iterations=2, angles=64)
+
+
+def test_search_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atlas, tmp_path):
+    from test_design import options, pool_proposer
+
+    from linkd.constraints import Constraints
+    from linkd.curves import normalise, resample
+    from linkd.design.search import search as run_search
+    from linkd.design.select import end_effector_path
+    from linkd.design.stages import Stages
+    from linkd.design.stroke import Goal
+    from linkd.generator import GeneratorSettings, generate
+    from linkd.graph import from_graph
+
+    pool = generate(8, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
+    target = normalise(resample(end_effector_path(from_graph(pool[1]), 600)[0], 200))[0]
+    atlas.save(tmp_path / "atlas.npz")
+    opts = options(atlas=True, atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=32,
+                   rounds=2, around=2, around_copies=3, candidates=4, rotations=1,
+                   refine_count=6, refine_settings=BRIEF)  # fmt: skip
+    search: dict = {}
+    found = run_search(Goal(target, True, False), Constraints(), opts, pool_proposer(pool),
+                       Stages(False), time.monotonic() + 600, search)  # fmt: skip
+    assert set(search["sources"]) == {"model", "atlas", "round 2"}
+    assert search["sources"]["atlas"]["placed"] > 0
+    for name, figures in search["sources"].items():
+        assert np.sum(found.source == SOURCES.index(name)) == figures["placed"]
+        assert figures["refined"] <= figures["placed"]
+    # Refinement and the later round only improve on what was placed.
+    refined = min(f["best_refined"] for f in search["sources"].values() if f["best_refined"])
+    assert refined <= min(f["best_placed"] for f in search["sources"].values()) + 1e-9
+    assert np.min(found.chamfer) < 0.02  # the curve is one of the pool's paths
