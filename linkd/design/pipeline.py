@@ -21,6 +21,7 @@ as the budget does not cut refinement short (report.json says whether it did).
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,7 +32,7 @@ from linkd.batch import LinkageBatch
 from linkd.curves import normalise, read_curve, resample
 from linkd.outdir import staged_output
 
-from .output import Delivered, deliver, finish, summary
+from .output import SKIP_REASONS, Delivered, deliver, finish, summary
 from .propose import Candidates, Proposer, model_proposer, place, propose, sub_mechanisms
 from .refine import RefineSettings, refine, single_thread
 from .select import diverse_best, to_mechanism, topology_key
@@ -99,7 +100,10 @@ def design(
     try:
         with single_thread(), staged_output(out, force) as stage:
             candidates = _search(target, o, proposer, stages, start, search)
-            found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source)
+            skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))  # better designs passed over
+            search["skipped"] = skipped
+            found, alternatives = _deliver(candidates, frame, points, o, stages, stage, source,
+                                           skipped)  # fmt: skip
             report = {
                 "format": "linkd-design-report/1",
                 "curve": {
@@ -179,8 +183,10 @@ def _deliver(
     stages: Stages,
     stage: Path,
     source: dict,
+    skipped: Counter,
 ) -> tuple[Delivered, list[dict]]:
-    """Verify designs from the best until one passes; then the alternatives, if asked for."""
+    """Verify designs from the best until one passes, counting in `skipped` why each better one
+    was passed over; then the alternatives, if asked for."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
@@ -188,7 +194,7 @@ def _deliver(
         for row in order[: o.attempts]:
             tried += 1
             mech = to_mechanism(batch, int(row), frame, o.units)
-            found = deliver(mech, points, stage, o.formats, source)
+            found = deliver(mech, points, stage, o.formats, source, skipped)
             if found:
                 break
         if found is None:
