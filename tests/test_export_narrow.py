@@ -55,7 +55,7 @@ def test_a_width_the_user_gives_is_kept(tmp_path):
 
 
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
-    with pytest.raises(ValueError, match="0.25 of the usual width"):
+    with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
         export_mechanism(KNOTTED, tmp_path, {"mjcf"})
     skipped = Counter()
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
