@@ -11,7 +11,7 @@ loop closures and crank servo become `mechanism.xml` with a `scene.xml` around i
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
@@ -19,7 +19,7 @@ from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
-from .layers import Layout, assign_layers, plate_points, plates, spacer_point, spacers, sweep
+from .layers import Layout, assign_layers, plates, sweep
 from .mjcf import build_mjcf, build_scene, qpos_at, servo_gains
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
@@ -28,6 +28,7 @@ __all__ = ["FORMATS", "ExportOptions", "ExportResult", "export_mechanism", "hing
            "joint_paths", "qpos_at"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
+NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -65,8 +66,7 @@ def export_mechanism(
     if status != Status.VALID:
         raise ValueError(f"invalid mechanism: {status.reason}")
     assembly = assemble(mech)
-    sizes = resolve_sizes(mech, assembly.parts, options)
-    layout = assign_layers(assembly, sweep(mech, sizes.link_width), sizes)
+    sizes, layout = _layered(mech, assembly, options or ExportOptions())
     files: list[Path] = []
     meshes = _write_meshes(mech, assembly, layout, sizes, out_dir) if "stl" in formats else {}
     files += [Path(path) for path in meshes.values()]
@@ -82,37 +82,45 @@ def export_mechanism(
                         sizes.to_dict(), layout.min_gap, layout.minimal)  # fmt: skip
 
 
+def _layered(mech: Mechanism, assembly: Assembly, options: ExportOptions) -> tuple[Sizes, Layout]:
+    """Sizes and layers. Where the default link width leaves no flat layering (a part passes
+    over a pin whose plates would lie above and below it, in every order), narrower links may
+    leave room: the width, and the sizes derived from it, shrink by the NARROWER factors.
+    Widths the user gave are kept (ValueError then, as when no width works)."""
+    sizes = resolve_sizes(mech, assembly.parts, options)
+    try:
+        return sizes, assign_layers(assembly, sweep(mech, sizes.link_width), sizes)
+    except ValueError as exc:
+        if options.link_width is not None:
+            raise
+        refusal = exc
+    for factor in NARROWER:
+        narrow = replace(options, link_width=sizes.link_width * factor)
+        try:
+            thin = resolve_sizes(mech, assembly.parts, narrow)
+            return thin, assign_layers(assembly, sweep(mech, thin.link_width), thin)
+        except ValueError:
+            continue
+    raise ValueError(f"{refusal} (links down to {NARROWER[-1]:g} of the usual width tried)")
+
+
 def _write_meshes(
     mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, out_dir: Path
 ) -> dict:
-    """One STL per plate and spacer in its body's frame, metres; returns name -> relative path."""
-    from .meshes import write_plate, write_spacer
+    """One STL per plate in its body's frame, metres; returns plate name -> relative path."""
+    from .meshes import write_plate
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
     (out_dir / MESHES).mkdir(exist_ok=True)
     meshes = {}
     for plate in plates(assembly, layout):
-        origin = origins[plate.part]
-        points = (plate_points(mech.positions, assembly, plate) - origin) * unit
-        holes = (mech.positions[list(plate.joints)] - origin) * unit
+        points = (mech.positions[list(plate.joints)] - origins[plate.part]) * unit
         path = f"{MESHES}/{plate.name}.stl"
         write_plate(out_dir / path, points, sizes.link_width * unit, sizes.hole_diameter * unit,
-                    sizes.thickness * unit, holes)  # fmt: skip
+                    sizes.thickness * unit)  # fmt: skip
         meshes[plate.name] = path
-    for spacer in spacers(assembly, layout):
-        centre = (spacer_point(mech.positions, assembly, spacer) - origins[spacer.part]) * unit
-        path = f"{MESHES}/{spacer.name}.stl"
-        height = spacer_height(spacer, sizes) * unit
-        write_spacer(out_dir / path, centre, sizes.link_width * unit, height)
-        meshes[spacer.name] = path
     return meshes
-
-
-def spacer_height(spacer, sizes: Sizes) -> float:
-    """A spacer's length: from the top of its lower plate to the bottom of its upper one."""
-    low, high = spacer.layers
-    return (high - low) * sizes.pitch - sizes.thickness
 
 
 def _write_model(
@@ -132,21 +140,10 @@ def describe_parts(assembly: Assembly, layout: Layout, sizes: Sizes, meshes: dic
     """JSON descriptions of the plates and pins (sizes in the mechanism's units)."""
     out = []
     for plate in plates(assembly, layout):
-        part = assembly.parts[plate.part]
-        entry = {"name": plate.name, "kind": part.kind, "joints": list(plate.joints),
-                 "layer": plate.layer}  # fmt: skip
-        if plate.segment is not None:
-            entry.update(kind="link piece", link=list(part.joints), along=list(plate.segment))
+        entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
+                 "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
         if plate.name in meshes:
             entry["mesh"] = meshes[plate.name]
-        out.append(entry)
-    for spacer in spacers(assembly, layout):
-        entry = {"name": spacer.name, "kind": "spacer",
-                 "link": list(assembly.parts[spacer.part].joints), "at": spacer.at,
-                 "layers": list(spacer.layers), "diameter": sizes.link_width,
-                 "length": spacer_height(spacer, sizes)}  # fmt: skip
-        if spacer.name in meshes:
-            entry["mesh"] = meshes[spacer.name]
         out.append(entry)
     for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
         out.append({

@@ -13,8 +13,8 @@ from a cover plate over the stack instead (the two plates are one rigid frame).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from itertools import combinations, pairwise
+from dataclasses import dataclass
+from itertools import combinations
 
 import numpy as np
 
@@ -45,73 +45,27 @@ class Layout:
     count: int  # number of layers, base and cover plates included
     min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
     minimal: bool = True  # the search proved that fewer layers cannot work
-    steps: dict = field(default_factory=dict)  # stepped link -> its pieces (from, to, layer),
-    # fractions of the way from its first joint (`stepped`); `layers` has its first piece's
 
 
 @dataclass(frozen=True)
 class Plate:
-    """A solid plate of a part on one layer (the ground has a base and maybe a cover; a stepped
-    link has two half plates, each reaching from its joint to the middle of the link)."""
+    """A solid plate of a part on one layer (the ground has a base and maybe a cover)."""
 
     name: str
     part: int
     joints: tuple[int, ...]  # joints it has holes for
     layer: int
-    segment: tuple[float, float] | None = None  # a piece of a stepped link: the stretch of it
-    # from this fraction of the way from its first joint to its second, to that one
-
-
-@dataclass(frozen=True)
-class Spacer:
-    """The standoff (a link width across) joining two pieces of a stepped link where it steps."""
-
-    name: str
-    part: int
-    at: float  # fraction of the way from the link's first joint to its second
-    layers: tuple[int, int]  # the layers of the pieces it joins, low then high
-
-
-def plate_points(positions: np.ndarray, assembly: Assembly, plate: Plate) -> np.ndarray:
-    """(k, 2) points whose discs (a link width across) a plate is the hull of."""
-    if plate.segment is None:
-        return positions[list(plate.joints)]
-    a, b = positions[list(assembly.parts[plate.part].joints)]
-    return np.array([a + f * (b - a) for f in plate.segment])
-
-
-def spacer_point(positions: np.ndarray, assembly: Assembly, spacer: Spacer) -> np.ndarray:
-    """(2,) where a spacer stands, in the frame of `positions`."""
-    a, b = positions[list(assembly.parts[spacer.part].joints)]
-    return a + spacer.at * (b - a)
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
-    """Every plate of the layout: the ground's base (and cover), then those of the moving parts."""
+    """Every plate of the layout: the ground's base (and cover), then one per moving part."""
     ground = assembly.parts[0]
     base = tuple(j for j in ground.joints if j not in layout.top_joints)
     out = [Plate(ground.name, 0, base, 0)] if base else []
     if layout.top_joints:
         out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1))
-    for p, part in enumerate(assembly.parts[1:], start=1):
-        if p in layout.steps:
-            a, b = part.joints
-            for k, (start, end, level) in enumerate(layout.steps[p]):
-                holes = (a,) * (start == 0) + (b,) * (end == 1)
-                out.append(Plate(f"{part.name}_piece{k}", p, holes, level, (start, end)))
-        else:
-            out.append(Plate(part.name, p, part.joints, int(layout.layers[p])))
-    return out
-
-
-def spacers(assembly: Assembly, layout: Layout) -> list[Spacer]:
-    """The spacers of the stepped links, one where each steps from a layer to another."""
-    out = []
-    for p, runs in sorted(layout.steps.items()):
-        for k, (low, high) in enumerate(pairwise(runs)):
-            levels = (min(low[2], high[2]), max(low[2], high[2]))
-            out.append(Spacer(f"{assembly.parts[p].name}_spacer{k}", p, low[1], levels))
-    return out
+    moving = enumerate(assembly.parts[1:], start=1)
+    return out + [Plate(part.name, p, part.joints, int(layout.layers[p])) for p, part in moving]
 
 
 @dataclass(frozen=True)
@@ -190,15 +144,12 @@ def sweep(mech: Mechanism, width: float) -> np.ndarray:
     return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
 
 
-def find_conflicts(
-    assembly: Assembly, paths: np.ndarray, sizes: Sizes, wide: frozenset[int] = frozenset()
-) -> Conflicts:
+def find_conflicts(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Conflicts:
     """Moving part pairs that may not share a layer, and the parts each pin's span must avoid.
 
     paths: (N, T, 2) joint positions over the sweep. Distances are between joint hulls, which
     the plates cover with half a width to spare; the largest joint step between two sampled
-    angles is added to each margin, so what happens between samples is covered too. Pins whose
-    index is in `wide` are a link width across (spacers), the others a hole diameter.
+    angles is added to each margin, so what happens between samples is covered too.
     """
     n_parts, n_joints = len(assembly.parts), len(paths)
     edges = hull_edges(assembly, paths[:, 0])
@@ -228,11 +179,10 @@ def find_conflicts(
     near = distance < width + clearance + step
     np.fill_diagonal(near, False)
     near[0], near[:, 0] = False, False  # the ground's plates have layers of their own
-    reach = [(width + (width if k in wide else sizes.hole_diameter)) / 2 + clearance + step
-             for k in range(len(assembly.pins))]  # fmt: skip
+    pin_reach = (width + sizes.hole_diameter) / 2 + clearance + step
     blocked = [
-        [q for q in range(1, n_parts) if q not in pin.members and to_part[pin.joint, q] < r]
-        for pin, r in zip(assembly.pins, reach)
+        [q for q in range(1, n_parts) if q not in pin.members and to_part[pin.joint, q] < pin_reach]
+        for pin in assembly.pins
     ]
     return Conflicts(near, blocked, distance)
 
@@ -243,9 +193,8 @@ def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     Layer 0 is the ground's base plate, under the stack of moving parts (layers 1..K). Each
     ground joint's pin stands in the base and reaches up to its highest part; where no order
     of the parts allows that, some pins hang from a cover plate over the stack instead (layer
-    K + 1). First an order of the parts that keeps every pin clear is found, then the fewest
-    layers the search can reach. Where the quick search finds no flat order, the exact search
-    of `stepped` lets links step between layers (ValueError if even that finds nothing).
+    K + 1). First an order of the parts that keeps every pin clear is found (or the mechanism
+    cannot be built flat: ValueError), then the fewest layers the search can reach.
     """
     conflicts = find_conflicts(assembly, paths, sizes)
     moving = conflicts.parts[1:, 1:]
@@ -255,14 +204,17 @@ def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     ]
     grounded = {k for k, pin in enumerate(assembly.pins) if 0 in pin.members}
     covers = [set(c) for r in range(len(grounded) + 1) for c in combinations(sorted(grounded), r)]
+    proved = True
     for cover in covers[: 1 + MAX_COVER_TRIES]:  # no cover first, then the smallest
-        order, _ = find_order(PinState(len(moving), pins, grounded, cover), moving)
+        order, done = find_order(PinState(len(moving), pins, grounded, cover), moving)
         if order is not None:
             break
+        proved &= done
     else:
-        from .stepped import stepped_layers  # no flat order: links may step between layers
-
-        return stepped_layers(assembly, paths, sizes)
+        raise ValueError(
+            "cannot be built from flat layers: some parts pass over pins whose plates lie above "
+            f"and below them, in every order {'tried' if proved else 'the search could try'}"
+        )
     layers = stack_in_order(moving, order)
     fewest, minimal = chromatic_number(moving)
     for stack in range(fewest, max(layers)):

@@ -17,27 +17,18 @@ STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attr
 
 
 def plate_mesh(
-    points: np.ndarray,
-    width: float,
-    hole_diameter: float,
-    thickness: float,
-    holes: np.ndarray | None = None,
+    points: np.ndarray, width: float, hole_diameter: float, thickness: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and triangles (F, 3) of a plate through `points` (k, 2), z in [0, t],
-    with pin holes at `holes` (default: at every point)."""
+    """Vertices (V, 3) and triangles (F, 3) of a plate through `points` (k, 2), z in [0, t]."""
     import manifold3d
 
-    def discs(radius: float, centres: np.ndarray) -> list:
+    def discs(radius: float) -> list:
         circle = manifold3d.CrossSection.circle(radius, SEGMENTS)
-        return [circle.translate((float(x), float(y))) for x, y in centres]
+        return [circle.translate((float(x), float(y))) for x, y in points]
 
-    outline = manifold3d.CrossSection.batch_hull(discs(width / 2, points))
-    centres = points if holes is None else holes
-    solid = outline.extrude(thickness)
-    if len(centres):
-        cut = manifold3d.CrossSection.batch_boolean(discs(hole_diameter / 2, centres),
-                                                    manifold3d.OpType.Add)  # fmt: skip
-        solid = (outline - cut).extrude(thickness)
+    outline = manifold3d.CrossSection.batch_hull(discs(width / 2))
+    holes = manifold3d.CrossSection.batch_boolean(discs(hole_diameter / 2), manifold3d.OpType.Add)
+    solid = (outline - holes).extrude(thickness)
     if solid.status() != manifold3d.Error.NoError or not solid.volume() > 0:
         raise ValueError("the plate is not a closed solid (are its holes wider than the plate?)")
     mesh = solid.to_mesh()
@@ -58,24 +49,7 @@ def write_stl(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str = "
 
 
 def write_plate(
-    path: Path,
-    points: np.ndarray,
-    width: float,
-    hole: float,
-    thickness: float,
-    holes: np.ndarray | None = None,
+    path: Path, points: np.ndarray, width: float, hole: float, thickness: float
 ) -> None:
     """Write a plate (sizes in metres) as a binary STL."""
-    mesh = plate_mesh(points, width, hole, thickness, holes)
-    write_stl(path, *mesh, name=f"linkd {path.stem}")
-
-
-def write_spacer(path: Path, centre: np.ndarray, diameter: float, height: float) -> None:
-    """Write a spacer, a solid cylinder standing at `centre` from z 0 to `height`, as STL."""
-    import manifold3d
-
-    solid = manifold3d.Manifold.cylinder(height, diameter / 2, diameter / 2, SEGMENTS)
-    solid = solid.translate((float(centre[0]), float(centre[1]), 0.0))
-    mesh = solid.to_mesh()
-    vertices = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
-    write_stl(path, vertices, np.asarray(mesh.tri_verts), name=f"linkd {path.stem}")
+    write_stl(path, *plate_mesh(points, width, hole, thickness), name=f"linkd {path.stem}")

@@ -27,16 +27,7 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import (
-    Layout,
-    Plate,
-    Spacer,
-    convex_hull,
-    plate_points,
-    plates,
-    spacer_point,
-    spacers,
-)
+from .layers import Layout, Plate, convex_hull, plates
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
@@ -99,13 +90,7 @@ class _Builder:
         for plate in every:
             if plate.part == 0:
                 self.plate(plate, meshes)
-        moving: dict[int, list[Plate]] = {}
-        for plate in every:
-            if plate.part:
-                moving.setdefault(plate.part, []).append(plate)
-        standoffs: dict[int, list[Spacer]] = {}
-        for spacer in spacers(self.assembly, self.layout):
-            standoffs.setdefault(spacer.part, []).append(spacer)
+        moving = {plate.part: plate for plate in every if plate.part}
         for h in self.assembly.hinges:
             x, y = (self.origin[h.child] - self.origin[h.parent]) * self.unit
             name = self.assembly.parts[h.child].name
@@ -114,10 +99,7 @@ class _Builder:
             if h.name == CRANK and self.armature > 0:
                 joint.set("armature", _fmt(self.armature))
             self.bodies[h.child] = body
-            for plate in moving[h.child]:
-                self.plate(plate, meshes)
-            for spacer in standoffs.get(h.child, []):
-                self.spacer(spacer, meshes)
+            self.plate(moving[h.child], meshes)
 
     def plate(self, plate: Plate, meshes: dict[str, str]) -> None:
         """A plate on its layer: its mesh, or boxes along its hull and discs at its joints."""
@@ -128,8 +110,7 @@ class _Builder:
             ET.SubElement(body, "geom", name=plate.name, type="mesh", mesh=plate.name,
                           pos=_fmt(0, 0, z), rgba=colour)  # fmt: skip
             return
-        world = plate_points(self.mech.positions, self.assembly, plate)
-        points = (world - self.origin[plate.part]) * self.unit
+        points = np.array([self.local(plate.part, j) for j in plate.joints])
         hull = [points[k] for k in convex_hull(points)]
         sides = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
         sides = sides if len(hull) > 1 else []  # a lone joint (the ground at one pivot): a boss
@@ -142,27 +123,10 @@ class _Builder:
             ET.SubElement(body, "geom", name=f"{plate.name}_bar{k}", type="box",
                           size=_fmt(length / 2, self.width / 2, self.thickness / 2),
                           pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
-        labels = plate.joints if plate.segment is None else ("_start", "_end")
-        for label, (x, y) in zip(labels, points):
-            ET.SubElement(body, "geom", name=f"{plate.name}_boss{label}", type="cylinder",
+        for j, (x, y) in zip(plate.joints, points):
+            ET.SubElement(body, "geom", name=f"{plate.name}_boss{j}", type="cylinder",
                           size=_fmt(self.width / 2, self.thickness / 2), pos=_fmt(x, y, zc),
                           rgba=colour)  # fmt: skip
-
-    def spacer(self, spacer: Spacer, meshes: dict[str, str]) -> None:
-        """A stepped link's spacer: from the top of its lower plate to the bottom of the upper."""
-        body = self.bodies[spacer.part]
-        low, high = spacer.layers
-        bottom, top = low * self.pitch + self.thickness, high * self.pitch
-        colour = _fmt(*LAYER_COLOURS[low % len(LAYER_COLOURS)], 1)
-        if spacer.name in meshes:
-            ET.SubElement(body, "geom", name=spacer.name, type="mesh", mesh=spacer.name,
-                          pos=_fmt(0, 0, bottom), rgba=colour)  # fmt: skip
-            return
-        world = spacer_point(self.mech.positions, self.assembly, spacer)
-        x, y = (world - self.origin[spacer.part]) * self.unit
-        ET.SubElement(body, "geom", name=spacer.name, type="cylinder",
-                      size=_fmt(self.width / 2, (top - bottom) / 2),
-                      pos=_fmt(x, y, (top + bottom) / 2), rgba=colour)  # fmt: skip
 
     def pin(self, k: int) -> None:
         """A pin body on its hub, spanning the layers of the parts it joins."""

@@ -164,6 +164,8 @@ def test_unrefined_single_sample_is_only_placed(pool, curve_file, tmp_path):
     outcome = design(curve_file, tmp_path / "one", single,
                      proposer=lambda curves, k, seed: pool[:1], show=False)  # fmt: skip
     assert outcome.design is not None and outcome.report["search"]["refined"] == 0
+    assert outcome.report["search"]["skipped"] == {"invalid": 0, "unbuildable": 0,
+                                                   "failed_verification": 0}  # fmt: skip
     sample = from_graph(pool[0])
     lengths = outcome.design.mechanism.link_lengths()
     ratio = lengths / sample.link_lengths()

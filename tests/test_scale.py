@@ -8,7 +8,6 @@ from linkd import classic
 from linkd.cli import main
 from linkd.export import export_mechanism
 from linkd.geometry import Similarity
-from linkd.scale import CURVE_RANGE_M
 
 
 def _ellipse(path, size):
@@ -27,14 +26,13 @@ def test_design_refuses_a_curve_outside_the_buildable_range(tmp_path, capsys, si
     assert not out.exists()
 
 
-def test_design_range_is_in_the_curves_units(tmp_path):
-    """50 m is fine; the same numbers in inches are too; 500 m is not."""
+def test_design_range_is_in_the_curves_units(tmp_path, capsys):
+    """500 units across is fine in millimetres, refused in metres (above 100 m)."""
     curve = tmp_path / "curve.csv"
-    _ellipse(curve, 50.0)
-    low, high = CURVE_RANGE_M
-    assert low <= 50.0 <= high and not high >= 500.0
     _ellipse(curve, 500.0)
     assert main(["design", str(curve), "--units", "m", "--out", str(tmp_path / "o")]) == 2
+    assert "500 m across" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("scale", [1e12, 1e-9])

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from linkd.verify.animation import parts_from_model
 from .select import Measures, measure
 
 MODEL_FILES = ("mechanism.xml", "scene.xml")
+SKIP_REASONS = ("invalid", "unbuildable", "failed_verification")  # why a design is passed over
 
 
 @dataclass
@@ -45,12 +47,16 @@ def deliver(
     formats: set[str],
     source: dict,
     timed: bool = False,
+    skipped: Counter | None = None,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
-    fails any step. `target` is the user's curve, in the mechanism's frame (`timed`: its rows
-    equally spaced in time)."""
+    fails any step, counted in `skipped` by the step ("invalid", "unbuildable": the export
+    refused it, "failed_verification"). `target` is the user's curve, in the mechanism's frame
+    (`timed`: its rows equally spaced in time)."""
+    skipped = Counter() if skipped is None else skipped
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
+        skipped["invalid"] += 1
         return None
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
@@ -58,10 +64,12 @@ def deliver(
         export = export_mechanism(mech, folder, set(formats) | {"mjcf"})
     except ValueError:
         _empty(folder)
+        skipped["unbuildable"] += 1
         return None
     report = verify_output(folder)
     if not report.passed:
         _empty(folder)
+        skipped["failed_verification"] += 1
         return None
     return Delivered(mech, measures, export, report, folder)
 

@@ -27,6 +27,7 @@ as the budget does not cut refinement short (report.json says whether it did).
 from __future__ import annotations
 
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -40,7 +41,7 @@ from linkd.outdir import staged_output
 
 from .constrained import screen
 from .drawn import read_target
-from .output import Delivered, deliver, finish, summary
+from .output import SKIP_REASONS, Delivered, deliver, finish, summary
 from .propose import SOURCES, Candidates, Proposer
 from .refine import RefineSettings, single_thread
 from .search import N_POINTS, NoDesign, search
@@ -130,8 +131,10 @@ def design(
             inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
             deadline = start + o.time_budget - DELIVERY_RESERVE
             candidates = search(goal, inner, o, proposer, stages, deadline, report_search)
+            skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))  # better designs passed over
+            report_search["skipped"] = skipped
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
-                                                     source)  # fmt: skip
+                                                     source, skipped)  # fmt: skip
             report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
@@ -169,10 +172,12 @@ def _deliver(
     stages: Stages,
     stage: Path,
     source: dict,
+    skipped: Counter,
 ) -> tuple[Delivered, list[dict], list]:
-    """Verify designs from the best until one passes; then the alternatives, if asked for.
-    With constraints, only designs that meet them all, measured exactly in the user's units,
-    are exported; the measurements of the one delivered come back too."""
+    """Verify designs from the best until one passes, counting in `skipped` why each better one
+    was passed over; then the alternatives, if asked for. With constraints, only designs that
+    meet them all, measured exactly in the user's units, are exported; the measurements of the
+    one delivered come back too."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     c = o.constraints
@@ -196,7 +201,7 @@ def _deliver(
             else:
                 origin = SOURCES[candidates.source[row]]
                 found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
-                                o.timed)  # fmt: skip
+                                o.timed, skipped)  # fmt: skip
                 if found:
                     break
                 failed[key] = failed.get(key, 0) + 1

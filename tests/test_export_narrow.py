@@ -1,0 +1,83 @@
+"""Mechanisms the default link width cannot layer: narrower links, refusals, and what
+`linkd design` counts when it passes a better design over."""
+
+import re
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from linkd.design.output import deliver
+from linkd.export import export_mechanism
+from linkd.export.layers import assign_layers, sweep
+from linkd.export.options import resolve_sizes
+from linkd.export.parts import assemble
+from linkd.mechanism import Mechanism
+from linkd.verify import verify_output
+
+# Generated (seed 2026, no. 19): the coupler sweeps over the crank pivot and the crank tip over
+# the rocker; at the default width no order of flat layers keeps every pin clear.
+TANGLED = Mechanism(
+    [(30.033, 43.479), (18.14, 24.021), (17.776, 8.193), (-70.562, 1.442), (5.57, 14.007),
+     (67.198, 72.843)],
+    [1, 0, 1, 0, 0, 0], [(0, 1), (0, 4), (1, 3), (2, 3), (3, 4), (3, 5), (4, 5)], (0, 1), 5,
+)  # fmt: skip
+
+# Generated (seed 2026, no. 80): a ternary crank whose two couplers each sweep over the other's
+# pin and over the pivot: no flat layering at any width linkd tries.
+KNOTTED = Mechanism(
+    [(48.349, 73.281), (86.18, 96.902), (35.808, 91.922), (-62.988, 87.08), (-58.152, 9.109),
+     (80.968, -67.956), (44.982, -77.361), (67.468, -0.151)],
+    [1, 0, 0, 1, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 6), (2, 4), (2, 7), (3, 4), (3, 5), (3, 6), (4, 5), (4, 7)],
+    (0, 1), 7,
+)  # fmt: skip
+
+
+def test_refused_at_the_default_width_is_built_with_narrower_links_and_verified(tmp_path):
+    assembly = assemble(TANGLED)
+    default = resolve_sizes(TANGLED, assembly.parts, None)
+    with pytest.raises(ValueError, match="flat layers"):
+        assign_layers(assembly, sweep(TANGLED, default.link_width), default)
+    result = export_mechanism(TANGLED, tmp_path)
+    assert result.sizes["link_width"] == pytest.approx(default.link_width / 2)
+    assert result.sizes["hole_diameter"] == pytest.approx(default.hole_diameter / 2)
+    report = verify_output(tmp_path, write=False)
+    assert report.passed, report.failed
+
+
+def test_a_width_the_user_gives_is_kept(tmp_path):
+    from linkd.export import ExportOptions
+
+    width = resolve_sizes(TANGLED, assemble(TANGLED).parts, None).link_width
+    with pytest.raises(ValueError, match="flat layers"):
+        export_mechanism(TANGLED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
+
+
+def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
+    with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
+        export_mechanism(KNOTTED, tmp_path, {"mjcf"})
+    skipped = Counter()
+    t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    target = KNOTTED.positions[KNOTTED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
+    assert deliver(KNOTTED, target, tmp_path, {"mjcf"}, {}, skipped) is None
+    assert skipped == {"unbuildable": 1}
+    assert not list(tmp_path.iterdir())
+
+
+def test_planted_collision_in_a_two_plate_ground_is_caught(tmp_path):
+    """The ground of this mechanism is a base plate plus a cover plate over the stack: lowered
+    into the stack, the cover sweeps through moving plates and verification must say so."""
+    from test_export import CRANK_PLATE
+
+    export_mechanism(CRANK_PLATE, tmp_path, {"mjcf", "stl"})
+    assert verify_output(tmp_path, write=False).passed
+    xml = tmp_path / "mechanism.xml"
+    text = xml.read_text()
+    cover = re.search(r'<geom name="ground_cover"[^>]*pos="0 0 ([^"]+)"', text)
+    assert cover is not None
+    lowered = float(cover.group(1)) / 2  # the middle of the stack
+    xml.write_text(text.replace(cover.group(0), cover.group(0).replace(
+        f'pos="0 0 {cover.group(1)}"', f'pos="0 0 {lowered:.12g}"')))  # fmt: skip
+    report = verify_output(tmp_path, write=False)
+    assert "collisions" in report.failed
