@@ -108,7 +108,7 @@ def pool_proposer(pool):
 
 
 def options(**changes) -> DesignOptions:
-    settings = dict(candidates=6, time_budget=600, refine_settings=QUICK, formats={"mjcf"},
+    settings = dict(candidates=12, time_budget=600, refine_settings=QUICK, formats={"mjcf"},
                     every_joint=False)  # fmt: skip
     return DesignOptions(**{**settings, **changes})
 

@@ -34,7 +34,7 @@ SPANS = tuple(np.linspace(0.1, 1.0, 13))  # sub-arc spans, fractions of a revolu
 REFINE_STEPS, REFINE_LEVELS = 7, 2  # finer grids: steps per side and how many
 MATCH_POINTS = 32  # points per sub-arc and target in the search
 SCORE_POINTS = 64  # points per placed stroke when ranking
-MAX_REACH = 15.0  # joints placed further than this from the target centroid are penalised
+MAX_REACH = 30.0  # joints placed further than this from the target centroid are penalised
 CHUNK = 128  # candidates searched at a time
 
 
