@@ -60,7 +60,7 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     skipped = Counter()
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = KNOTTED.positions[KNOTTED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
-    assert deliver(KNOTTED, target, tmp_path, {"mjcf"}, {}, skipped) is None
+    assert deliver(KNOTTED, target, tmp_path, {"mjcf"}, {}, skipped=skipped) is None
     assert skipped == {"unbuildable": 1}
     assert not list(tmp_path.iterdir())
 
