@@ -181,13 +181,13 @@ def run(args: argparse.Namespace) -> int:
     m = d.measures
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers, verified in MuJoCo")  # fmt: skip
-    path = r["curve"]["path"] + (" (chosen by --path auto)" if args.path == "auto" else "")
+    chosen = " (chosen by --path auto)" if args.path == "auto" else ""
     stroke = ""
     if m.crank_range_deg is not None:
         a, b = m.crank_range_deg
         stroke = f", traced while the crank turns from {a:.1f} to {b:.1f} deg"
     timing = "" if m.timing_error is None else f"; timing error {m.timing_error:.4f} (timed)"
-    print(f"  {path} path{stroke}{timing}")
+    print(f"  {r['curve']['path']} path{chosen}{stroke}{timing}")
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
