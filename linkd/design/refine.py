@@ -264,22 +264,23 @@ def polyline_chamfer(path: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         cross = torch.bmm(path, target.transpose(1, 2)).mul_(-2)  # (B, T, M)
         near_target = (cross + (target[0] ** 2).sum(1)).argmin(2)
         near_path = cross.add_((path**2).sum(2)[:, :, None]).min(1).indices
-    to_path = _point_to_polyline(target, path, near_path).mean(1)
+    to_path = point_to_polyline(target, path, near_path).mean(1)
     segment = (torch.roll(path, -1, 1) - path).norm(dim=-1).detach()
     weight = 0.5 * (segment + torch.roll(segment, 1, 1))
     weight = weight / weight.sum(1, keepdim=True).clamp_min(1e-12)
-    to_target = (_point_to_polyline(path, target, near_target) * weight).sum(1)
+    to_target = (point_to_polyline(path, target, near_target) * weight).sum(1)
     return to_path + to_target
 
 
-def _point_to_polyline(
-    points: torch.Tensor, polyline: torch.Tensor, nearest: torch.Tensor
+def point_to_polyline(
+    points: torch.Tensor, polyline: torch.Tensor, nearest: torch.Tensor, closed: bool = True
 ) -> torch.Tensor:
-    """(B, P) distance from points (B, P, 2) to the closed polylines (B, Q, 2): to the nearer
-    of the two edges around each point's `nearest` vertex (B, P)."""
+    """(B, P) distance from points (B, P, 2) to the polylines (B, Q, 2), closed or open: to the
+    nearer of the two edges around each point's `nearest` vertex (B, P)."""
     q = polyline.shape[1]
     best = None
-    for first in (nearest - 1) % q, nearest:
+    for first in (nearest - 1, nearest):
+        first = first % q if closed else first.clamp(0, q - 2)
         a = _gather(polyline, first)
         edge = _gather(polyline, (first + 1) % q) - a
         rel = points - a

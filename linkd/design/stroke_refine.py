@@ -25,7 +25,7 @@ import torch
 from linkd.batch import LinkageBatch
 from linkd.kinematics import trace
 
-from .refine import Objective, RefineResult, RefineSettings, Terms, refine
+from .refine import Objective, RefineResult, RefineSettings, Terms, point_to_polyline, refine
 from .stroke import Goal, crank_ranges
 
 STROKE_ANGLES = 128  # crank angles along an untimed stroke
@@ -103,7 +103,7 @@ def open_chamfer(path: torch.Tensor, target: torch.Tensor, closed: bool = False)
     with torch.no_grad():
         d = torch.cdist(path, goal)
         near_target, near_path = d.argmin(2), d.argmin(1)
-    to_path = _to_polyline(goal, path, near_path, closed).mean(1)
+    to_path = point_to_polyline(goal, path, near_path, closed).mean(1)
     segment = (path[:, 1:] - path[:, :-1]).norm(dim=-1).detach()
     if closed:
         segment = torch.cat([segment, (path[:, :1] - path[:, -1:]).norm(dim=-1).detach()], 1)
@@ -112,30 +112,8 @@ def open_chamfer(path: torch.Tensor, target: torch.Tensor, closed: bool = False)
         pad = torch.zeros_like(segment[:, :1])
         weight = 0.5 * (torch.cat([segment, pad], 1) + torch.cat([pad, segment], 1))
     weight = weight / weight.sum(1, keepdim=True).clamp_min(1e-12)
-    to_target = (_to_polyline(path, goal, near_target, closed) * weight).sum(1)
+    to_target = (point_to_polyline(path, goal, near_target, closed) * weight).sum(1)
     return to_path + to_target
-
-
-def _to_polyline(points: torch.Tensor, polyline: torch.Tensor, nearest: torch.Tensor,
-                 closed: bool) -> torch.Tensor:  # fmt: skip
-    """(B, P) distance from points (B, P, 2) to polylines (B, Q, 2): to the nearer of the two
-    edges around each point's `nearest` vertex (B, P)."""
-    q = polyline.shape[1]
-    best = None
-    for first in (nearest - 1, nearest):
-        first = first % q if closed else first.clamp(0, q - 2)
-        a = _gather(polyline, first)
-        edge = _gather(polyline, (first + 1) % q) - a
-        rel = points - a
-        along = ((rel * edge).sum(-1) / (edge * edge).sum(-1).clamp_min(1e-18)).clamp(0, 1)
-        gap = rel - along[..., None] * edge
-        d2 = (gap * gap).sum(-1)
-        best = d2 if best is None else torch.minimum(best, d2)
-    return torch.sqrt(best + 1e-12)
-
-
-def _gather(points: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
-    return points.gather(1, index[..., None].expand(-1, -1, 2))
 
 
 def resample_open(path: torch.Tensor, count: int) -> torch.Tensor:
