@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from functools import cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +41,11 @@ from .stages import Stages
 from .stroke import Goal, place_stroke
 from .stroke_refine import refine_stroke
 
+if TYPE_CHECKING:
+    from linkd.constraints import Constraints
+
+    from .pipeline import DesignOptions
+
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 
 
@@ -47,7 +53,9 @@ class NoDesign(Exception):
     """No candidate became a valid, verified design."""
 
 
-def search_width(time_budget: float, rounds: int | None, atlas_paths: int | None):
+def search_width(
+    time_budget: float, rounds: int | None, atlas_paths: int | None
+) -> tuple[int, int]:
     """Refinement rounds and atlas paths for the time budget, where not given: two rounds and
     1024 paths for the default 30 s, one round and 1024 paths more for every further 30 s. (The
     budget's deadline still stops refinement early on a slow or busy machine.)"""
@@ -55,8 +63,8 @@ def search_width(time_budget: float, rounds: int | None, atlas_paths: int | None
     return rounds or 1 + steps, atlas_paths or 1024 * steps
 
 
-def search(goal: Goal, inner, o, proposer: Proposer | None, stages: Stages, deadline: float,
-           report: dict) -> Candidates:  # fmt: skip
+def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
+           stages: Stages, deadline: float, report: dict) -> Candidates:  # fmt: skip
     """Propose, place and refine (`o`: the DesignOptions; `inner`: the constraints in the
     target's frame); each candidate's `chamfer` is its latest curve error (on an open or timed
     target: its stroke's Chamfer distance, or its timing error). Fills `report`."""
@@ -152,8 +160,15 @@ def search(goal: Goal, inner, o, proposer: Proposer | None, stages: Stages, dead
     return candidates
 
 
-def _refiner(candidates: Candidates, goal: Goal, target: np.ndarray, stroke: bool,
-             settings: RefineSettings, inner, deadline: float) -> Callable:  # fmt: skip
+def _refiner(
+    candidates: Candidates,
+    goal: Goal,
+    target: np.ndarray,
+    stroke: bool,
+    settings: RefineSettings,
+    inner: Constraints,
+    deadline: float,
+) -> Callable:
     """A function refining given rows of `candidates` in place (those never within the
     refinement's limits get an infinite error: tried last); it returns the iterations run."""
 
