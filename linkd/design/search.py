@@ -126,7 +126,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     report["refined"] = 0
     if o.refine:
         settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-        refine_rows = _refiner(candidates, goal, target, stroke, settings, inner, deadline)
+        refine_rows = _refiner(goal, target, stroke, settings, inner, deadline)
         with stages.stage("refine", "refining the best designs") as note:
             rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
                                          o.refine_count, o.per_topology), int)  # fmt: skip
@@ -144,8 +144,6 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                     found = rank(found, inner)
                 first = len(candidates)
                 candidates = merged(candidates, found)
-                refine_rows = _refiner(candidates, goal, target, stroke, settings, inner,
-                                       deadline)  # fmt: skip
                 placed = np.concatenate([placed, found.chamfer])
                 rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
                                                      o.refine_count, o.refine_count), int)
@@ -161,7 +159,6 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
 
 
 def _refiner(
-    candidates: Candidates,
     goal: Goal,
     target: np.ndarray,
     stroke: bool,
