@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linkd.graph import decode
+from linkd.graph import ADJ, FEATURES, TYPE, VALID, XY, decode
 from linkd.mechanism import Mechanism
 
 
@@ -54,6 +54,18 @@ class LinkageBatch:
             batch.adjacency[row, :k, :k] = m.adjacency()
             batch.end_effector[row] = m.end_effector
         return batch
+
+    def to_graphs(self) -> np.ndarray:
+        """(B, N, 24) graph matrices of linkages in graph order (motor first, parents before
+        children, end effector last): the inverse of `from_graphs`."""
+        b, n = self.valid.shape
+        graphs = np.full((b, n, FEATURES), -1.0, np.float32)
+        graphs[..., VALID] = self.valid
+        graphs[..., TYPE] = np.where(self.valid, self.fixed, -1)
+        graphs[..., XY] = np.where(self.valid[..., None], self.positions, 0)
+        lower = np.tril(np.ones((n, n), bool), -1) & self.valid[:, :, None]
+        graphs[..., ADJ.start : ADJ.start + n] = np.where(lower, self.adjacency, -1)
+        return graphs
 
     def sub_mechanisms(self, rows: np.ndarray, joints: np.ndarray) -> LinkageBatch:
         """For each pair (rows[i], joints[i]), the linkage of that joint and the joints it hangs

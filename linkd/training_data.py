@@ -125,8 +125,7 @@ def sub_mechanism_examples(
     joint traces the curve. graphs (B, 20, 24) in their curve's frame, curves (B, T, 2).
     """
     from linkd.batch import LinkageBatch
-    from linkd.generator import circle_residual
-    from linkd.graph import ADJ, FEATURES, TYPE
+    from linkd.generator import GeneratorSettings, circle_residual
     from linkd.validator import validate
 
     batch = LinkageBatch.from_graphs(graphs.numpy())
@@ -140,31 +139,14 @@ def sub_mechanism_examples(
     joint = (batch.valid & ~batch.fixed & (index >= 2) & (index < batch.end_effector[:, None])
              & result.valid[:, None] & (rms > 1e-3))  # fmt: skip
     rows, cols = np.nonzero(joint)
-    genuine = circle_residual(unit[rows, cols]) >= 0.01
-    joint[rows[~genuine], cols[~genuine]] = False
+    arc = circle_residual(unit[rows, cols]) < GeneratorSettings().arc_tolerance
+    joint[rows[arc], cols[arc]] = False
     score = torch.rand((b, n), generator=generator).numpy() * joint
     pick = (torch.rand(b, generator=generator).numpy() < share) & joint.any(1)
     rows, chosen = np.flatnonzero(pick), score.argmax(1)[pick]
     if len(rows) == 0:
         return graphs, curves
-    parents = np.tril(batch.adjacency[rows], -1)
-    needed = (index[None] == chosen[:, None]) | (index[None] < 2)
-    for _ in range(n):  # each pass adds the parents of what is needed
-        needed |= (parents & needed[:, :, None]).any(1)
-    order = np.argsort(~needed, axis=1, kind="stable")  # needed joints first, in order
-    valid = np.take_along_axis(needed, order, 1)
-    adjacency = np.take_along_axis(batch.adjacency[rows], order[:, :, None], 1)
-    adjacency = np.take_along_axis(adjacency, order[:, None, :], 2) & valid[:, :, None]
-    sub = torch.full((len(rows), n, FEATURES), -1.0)
-    sub[..., VALID] = torch.as_tensor(valid, dtype=torch.float32)
-    fixed = np.take_along_axis(batch.fixed[rows], order, 1)
-    sub[..., TYPE] = torch.as_tensor(np.where(valid, fixed, -1), dtype=torch.float32)
-    xy = np.take_along_axis(batch.positions[rows], order[:, :, None], 1)
-    sub[..., XY] = torch.as_tensor(np.where(valid[..., None], xy, 0), dtype=torch.float32)
-    lower = np.tril(np.ones((n, n), bool), -1) & valid[:, :, None]
-    links = np.full((len(rows), n, FEATURES - ADJ.start), -1.0)
-    links[..., :n] = np.where(lower, adjacency, -1)
-    sub[..., ADJ] = torch.as_tensor(links, dtype=torch.float32)
+    sub = torch.as_tensor(batch.sub_mechanisms(rows, chosen).to_graphs())
     path = paths[rows, chosen]
     centre = torch.as_tensor(path.mean(1), dtype=torch.float32)
     scale = torch.as_tensor(rms[rows, chosen], dtype=torch.float32)

@@ -75,3 +75,11 @@ def test_non_dyadic_mechanism_has_no_graph():
     mech = classic.crank_rocker()
     with pytest.raises(ValueError, match="not dyadic"):
         to_graph(mech.replace(links=[link for link in mech.links if link != (2, 3)]))
+
+
+def test_batch_graph_matrices_round_trip():
+    from linkd.batch import LinkageBatch
+    from linkd.generator import generate
+
+    graphs = generate(16, 4).graphs
+    np.testing.assert_array_equal(LinkageBatch.from_graphs(graphs).to_graphs(), graphs)

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from test_design import pool_proposer
 
 from linkd import classic
 from linkd.cli import main
@@ -97,14 +98,6 @@ def pool(tmp_path_factory):
             continue
         return np.concatenate([graphs[k:], graphs[:k]])
     raise AssertionError("no exportable design in the pool")
-
-
-def pool_proposer(pool):
-    def propose(curves, per_curve, seed):
-        order = np.random.default_rng(seed).permutation(len(pool))
-        return pool[np.resize(order, len(curves) * per_curve)]
-
-    return propose
 
 
 def options(**changes) -> DesignOptions:
