@@ -144,7 +144,6 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--{name} must be at least {1 if name == 'candidates' else 0}")
     if not args.time_budget > 0:
         raise InputError(f"--time-budget must be positive, got {args.time_budget}")
-    _check_size(args.curve, args.units)
     if args.path not in PATH_KINDS:
         raise InputError(f"--path: expected one of {', '.join(PATH_KINDS)}, got {args.path!r}")
     if args.out:
@@ -200,11 +199,3 @@ def run(args: argparse.Namespace) -> int:
     parts = ", ".join(f"{k[:-2]} {v:.1f}" for k, v in t.items() if k != "total_s")
     print(f"  {t['total_s']:.1f} s ({parts})")
     return 0
-
-
-def _check_size(curve: str, units: str) -> None:
-    """Refuse, before any work, a curve too small or too large to build (`linkd.scale`)."""
-    from linkd.curves import read_curve
-    from linkd.scale import check_curve_size
-
-    check_curve_size(read_curve(curve), units, curve)

@@ -38,6 +38,7 @@ from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints, binding, check, describe, no_design
 from linkd.curves import normalise, read_path
 from linkd.outdir import staged_output
+from linkd.scale import check_curve_size
 
 from .constrained import screen
 from .drawn import read_target
@@ -115,6 +116,7 @@ def design(
     stages = Stages(show)
     with stages.stage("read", "reading the curve") as note:
         points, closed = read_path(curve_path, o.path)
+        check_curve_size(points, o.units, str(curve_path))  # before any work
         goal, frame = make_goal(points, closed, o.timed, N_POINTS)
         if closed and not o.timed:  # a drawn loop, read as drawn.py says
             target, frame = normalise(read_target(points, N_POINTS, o.smooth))
