@@ -22,6 +22,7 @@ import torch
 
 from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints, measure_batch
+from linkd.curves import chamfer_batch
 from linkd.geometry import Similarity
 from linkd.validator import validate
 
@@ -94,9 +95,8 @@ def _fit_about_origin(u: torch.Tensor, v: torch.Tensor, factor: torch.Tensor) ->
 
 
 def _chamfer(a: torch.Tensor, b: torch.Tensor, chunk: int = 64) -> torch.Tensor:
-    """(B,) Chamfer distance (mean nearest distance both ways, summed) of a (B, n, 2) to b."""
-    parts = [torch.cdist(part, b[None].expand(len(part), -1, -1)) for part in a.split(chunk)]
-    return torch.cat([d.amin(2).mean(1) + d.amin(1).mean(1) for d in parts])
+    """(B,) Chamfer distance of a (B, n, 2) to b (m, 2), in chunks that bound the memory."""
+    return torch.cat([chamfer_batch(part, b) for part in a.split(chunk)])
 
 
 def violation(batch: LinkageBatch, c: Constraints) -> np.ndarray:
