@@ -172,9 +172,12 @@ class LinkD(nn.Module):
 
         def predict(x_t: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
             x_in = self.head_input(x_t, index)
-            out = self.head(x_in, t, context)
-            if null_context is not None and w != 1.0:
-                out = out + (w - 1.0) * (out - self.head(x_in, t, null_context))
+            if null_context is not None and w != 1.0:  # both passes as one batch
+                both = self.head(x_in.repeat(2, 1), t.repeat(2), torch.cat([context, null_context]))
+                out, null = both.chunk(2)
+                out = out + (w - 1.0) * (out - null)
+            else:
+                out = self.head(x_in, t, context)
             x0 = self.clean_estimate(out)
             if not c.sample_coins:
                 return x0
