@@ -1,7 +1,8 @@
 """The sizes linkd can build, checked before any work so extremes fail with one clear line.
 
-Exported parts follow a mechanism's own scale (`linkd.export.options`). Below about a millimetre
-across, MuJoCo refuses the plates' meshes (their volume is under its floor); above about a
+Exported parts follow a mechanism's own scale (`linkd.export.options`). Below about half a
+millimetre across, MuJoCo refuses the plates' meshes (their volume is under its floor; at 0.3 mm
+some generator mechanisms' plates already are); above about a
 kilometre its solver tolerances no longer close the loops (`linkd verify` fails mobility and
 kinematics at 10 km). A designed mechanism spans its curve and usually several times more, so a
 curve is held to a smaller top size than a mechanism.
@@ -14,8 +15,8 @@ import numpy as np
 from linkd.errors import InputError
 from linkd.mechanism import UNITS_IN_METRES
 
-MECHANISM_RANGE_M = (1e-3, 1e3)  # across, metres: what export and verification handle
-CURVE_RANGE_M = (1e-3, 1e2)  # across, metres: leaves room for the mechanism around the curve
+MECHANISM_RANGE_M = (5e-4, 1e3)  # across, metres: what export and verification handle
+CURVE_RANGE_M = (2.5e-4, 1e2)  # across, metres: leaves room for the mechanism around the curve
 
 
 def across(points: np.ndarray) -> float:

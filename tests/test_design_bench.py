@@ -49,3 +49,17 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
     assert "verified        100.0%" in summary_table(total)
     assert total["found_by"] == {"model": 2}  # the only source here
     assert total["stages"]["model, placed"] >= total["stages"]["+ atlas, placed"]
+
+
+def test_bench_counts_a_refused_curve_and_goes_on(tmp_path):
+    """A curve linkd refuses (here far too small) is a row without a design, not the end of
+    the benchmark."""
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    tiny, bad = tmp_path / "tiny.csv", tmp_path / "bad.csv"
+    write_curve(tiny, 1e-6 * np.c_[np.cos(t), np.sin(t)])
+    bad.write_text("x,y\n1,2\n")
+    lines = []
+    results = run_bench([tiny, bad], DesignOptions(atlas=False), None, say=lines.append)
+    assert [row["valid"] for row in results["curves"]] == [False, False] and len(lines) == 2
+    assert "across" in results["curves"][0]["reason"] and "across" in lines[0]
+    assert results["total"]["valid_rate"] == 0.0 and results["total"]["chamfer_mean"] is None

@@ -140,8 +140,13 @@ def run_bench(
                 if k == 0:
                     say(f"constraints for {file.name}: {limits.to_dict()}")
             start = time.perf_counter()
-            outcome = design(curve, Path(scratch) / f"{k}", replace(own, constraints=limits),
-                             proposer, show=False)  # fmt: skip
+            try:
+                outcome = design(curve, Path(scratch) / f"{k}", replace(own, constraints=limits),
+                                 proposer, show=False)  # fmt: skip
+            except InputError as exc:  # a curve linkd refuses counts as one without a design
+                rows.append(_refused_row(file, str(exc), time.perf_counter() - start))
+                say(_line(rows[-1]))
+                continue
             seconds = time.perf_counter() - start
             rows.append(_row(file, outcome, seconds))
             if limits:
@@ -176,6 +181,13 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         points, _ = read_path(file, "open")
         row["deviation"] = stroke_deviation(outcome.design.mechanism, points)
     return row
+
+
+def _refused_row(file: Path, reason: str, seconds: float) -> dict:
+    keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation",
+            "timing_error", "found_by")  # fmt: skip
+    return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
+            "verified": False, "seconds": seconds, "sources": {}, "reason": reason}  # fmt: skip
 
 
 def stroke_deviation(mech, target: np.ndarray, samples: int = 2000) -> float:
