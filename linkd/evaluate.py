@@ -40,9 +40,11 @@ class Targets:
 
 
 def point_normalised(curves: np.ndarray) -> np.ndarray:
-    """Centroid 0 and RMS radius 1 of the points as given (the benchmark's convention)."""
+    """Centroid 0 and RMS radius 1 of the points as given (the benchmark's convention). A path
+    that does not move has no radius: NaN, so such a design counts as invalid."""
     centroid, radius = curve_moments(curves, by_arc_length=False)
-    return (curves - centroid[..., None, :]) / radius[..., None, None]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return (curves - centroid[..., None, :]) / radius[..., None, None]
 
 
 def design_chamfer(graphs: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -69,7 +69,7 @@ PRESETS = {
     # Continues a `cpu-guided` run (--init) with half the examples replaced by sub-mechanisms.
     "cpu-sub": TrainConfig(
         model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
-        max_steps=3000, lr=3e-4, warmup=100, eval_every=1500, sub_mechanisms=0.5,
+        max_steps=14_000, lr=3e-4, warmup=100, eval_every=3500, sub_mechanisms=0.5,
     ),
     "cuda": TrainConfig(
         model=LinkDConfig(
