@@ -59,25 +59,43 @@ def clearance(chain: np.ndarray, segments: tuple[np.ndarray, np.ndarray]) -> flo
 
 def route(ends: np.ndarray, obstacles: list[np.ndarray], reach: float) -> np.ndarray | None:
     """Waypoints (k, 2) of a chain from ends[0] to ends[1] that keeps `reach` from every
-    obstacle path, ends excluded (k = 0: the straight link is clear); None if there is none."""
-    segments = _segments(obstacles)
-    if clearance(ends, segments) >= reach:
+    obstacle path, ends excluded (k = 0: the straight link is clear); None if there is none.
+
+    Free cells keep reach plus two cells from the rasterised paths, so a straight bar through
+    free cells (sampled every half cell) keeps the reach from the paths themselves."""
+    if clearance(ends, _segments(obstacles)) >= reach:
         return np.empty((0, 2))
     points = np.concatenate([ends, *obstacles])
-    lo = points.min(0) - 2 * reach
-    cell = float((points.max(0) + 2 * reach - lo).max()) / GRID_CELLS
-    shape = tuple(np.ceil((points.max(0) + 2 * reach - lo) / cell).astype(int) + 1)
+    lo = points.min(0) - 3 * reach
+    cell = float((points.max(0) + 3 * reach - lo).max()) / GRID_CELLS
+    shape = tuple(np.ceil((points.max(0) + 3 * reach - lo) / cell).astype(int) + 1)
     free = ndimage.distance_transform_edt(~_raster(obstacles, lo, cell, shape)) * cell
-    free = free > reach + cell
-    start, goal = (tuple(np.round((e - lo) / cell).astype(int)) for e in ends)
-    if not (free[start] and free[goal]):
+    grid = _Grid(free > reach + 2 * cell, lo, cell)
+    start, goal = grid.cell(ends[0]), grid.cell(ends[1])
+    if not (grid.free[start] and grid.free[goal]):
         return None
-    cells = _shortest(free, start, goal)
+    cells = _shortest(grid.free, start, goal)
     if cells is None:
         return None
     chain = np.concatenate([ends[:1], lo + cells[1:-1] * cell, ends[1:]])
-    waypoints = _pull(chain, segments, reach)
+    waypoints = _pull(chain, grid)
     return waypoints if len(waypoints) <= MAX_WAYPOINTS else None
+
+
+class _Grid:
+    """Free cells of a routing grid, and whether a straight bar stays on them."""
+
+    def __init__(self, free: np.ndarray, lo: np.ndarray, cell: float):
+        self.free, self.lo, self.size = free, lo, cell
+
+    def cell(self, point: np.ndarray) -> tuple:
+        return tuple(np.round((point - self.lo) / self.size).astype(int))
+
+    def clear(self, a: np.ndarray, b: np.ndarray) -> bool:
+        steps = int(np.ceil(np.linalg.norm(b - a) / (self.size / 2))) + 1
+        t = np.linspace(0.0, 1.0, steps)[:, None]
+        index = np.round((a + (b - a) * t - self.lo) / self.size).astype(int)
+        return bool(self.free[index[:, 0], index[:, 1]].all())
 
 
 def _raster(obstacles: list[np.ndarray], lo: np.ndarray, cell: float, shape: tuple) -> np.ndarray:
@@ -122,16 +140,22 @@ def _shortest(free: np.ndarray, start: tuple, goal: tuple) -> np.ndarray | None:
     return np.stack(np.unravel_index(path[::-1], free.shape), -1)
 
 
-def _pull(chain: np.ndarray, segments: tuple, reach: float) -> np.ndarray:
+def _pull(chain: np.ndarray, grid: _Grid) -> np.ndarray:
     """Waypoints of a grid path pulled straight: from each kept point on along the path as far
-    as a straight bar stays clear."""
+    as a straight bar stays on free cells, then without the bends that are not needed."""
     kept = [0]
     while kept[-1] < len(chain) - 1:
         here = kept[-1]
         far = here + 1
-        while far + 1 < len(chain) and clearance(chain[[here, far + 1]], segments) >= reach:
+        while far + 1 < len(chain) and grid.clear(chain[here], chain[far + 1]):
             far += 1
         kept.append(far)
+    k = 1
+    while k < len(kept) - 1:  # then drop each bend its neighbours see past
+        if grid.clear(chain[kept[k - 1]], chain[kept[k + 1]]):
+            kept.pop(k)
+        else:
+            k += 1
     return chain[kept[1:-1]]
 
 
