@@ -6,6 +6,8 @@ revolution; unless that path (grown by the pin's reach) separates the link's two
 link can go around it: a chain of straight bars through a few waypoints that are rigid on the
 link, as builders make cranked links. Routes are shortest paths on a grid in the link's
 assembly-pose frame, pulled straight between the waypoints, with the reach kept as clearance.
+Where a pin's path runs over one of the link's joints or circles one and not the other, no
+route exists; when the pins left after those cannot be layered either, bending is not tried.
 """
 
 from __future__ import annotations
@@ -168,20 +170,18 @@ def bent_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     reach = (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance + 2 * step
     conflicts = find_conflicts(assembly, paths, sizes)
     turns = part_rotations(assembly, paths)
-    hopeful = [
-        [q for q in parts if not _cannot_pass(assembly, paths, turns, q, pin.joint, reach)]
-        for pin, parts in zip(assembly.pins, conflicts.blocked)
-    ]
-    stack_layers(assembly, replace(conflicts, blocked=[
-        [q for q in parts if q not in maybe] for parts, maybe in zip(conflicts.blocked, hopeful)
-    ]), sizes)  # fmt: skip
+    passable: dict[tuple[int, int], bool] = {}  # (pin, part): might a bent part get round?
+    for k, pin in enumerate(assembly.pins):
+        for q in range(len(assembly.parts)):
+            passable[k, q] = not _cannot_pass(assembly, paths, turns, q, pin.joint, reach)
+    hopeless = [[q for q in b if not passable[k, q]] for k, b in enumerate(conflicts.blocked)]
+    stack_layers(assembly, replace(conflicts, blocked=hopeless), sizes)  # or ValueError
     pins: dict[int, set[int]] = {}
-    extended, chains = paths, {}
     for _ in range(ROUNDS):
-        for pin, parts in zip(assembly.pins, conflicts.blocked):
+        for k, parts in enumerate(conflicts.blocked):
             for q in parts:
-                if not _cannot_pass(assembly, paths, turns, q, pin.joint, reach):
-                    pins.setdefault(q, set()).add(pin.joint)
+                if passable[k, q]:
+                    pins.setdefault(q, set()).add(assembly.pins[k].joint)
         routes = route_links(assembly, paths, pins, reach)
         extended, chains = with_waypoints(assembly, paths, routes)
         conflicts = find_conflicts(assembly, extended, sizes, chains)
@@ -192,7 +192,9 @@ def bent_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     raise refusal
 
 
-def _cannot_pass(assembly: Assembly, paths, turns, q: int, joint: int, reach: float) -> bool:
+def _cannot_pass(
+    assembly: Assembly, paths: np.ndarray, turns: np.ndarray, q: int, joint: int, reach: float
+) -> bool:
     """Is no way round the pin at `joint` for part q? True for a plate (only links bend), or
     when the pin's relative path comes within reach of a joint of q or winds round one of its
     joints a different number of times than round the other (any chain between them crosses)."""
@@ -201,13 +203,13 @@ def _cannot_pass(assembly: Assembly, paths, turns, q: int, joint: int, reach: fl
         return True
     path = relative_path(paths, turns[q], part.joints, joint)
     z = path[:, 0] + 1j * path[:, 1]
-    turns_round = []
+    windings = []
     for x, y in paths[list(part.joints), 0]:
         d = z - complex(x, y)
         if np.abs(d).min() < reach:
             return True
-        turns_round.append(round(float(np.angle(np.roll(d, -1) / d).sum() / (2 * np.pi))))
-    return turns_round[0] != turns_round[1]
+        windings.append(round(float(np.angle(np.roll(d, -1) / d).sum() / (2 * np.pi))))
+    return windings[0] != windings[1]
 
 
 def route_links(
