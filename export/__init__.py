@@ -4,8 +4,9 @@
     result = export_mechanism(mech, Path("out"), {"mjcf", "stl"})
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
-analytic kinematics (`layers`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
-loop closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
+analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
+`routing`), plates become STL meshes (`meshes`) and the bodies, hinges, pins, loop closures and
+crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ from a cover plate over the stack instead (the two plates are one rigid frame).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from itertools import combinations
+from itertools import combinations, pairwise
 
 import numpy as np
 
@@ -133,7 +133,7 @@ def hull_edges(
     edges = []
     for p, part in enumerate(assembly.parts):
         if p in chains:
-            edges += [(p, a, b) for a, b in zip(chains[p], chains[p][1:])]
+            edges += [(p, a, b) for a, b in pairwise(chains[p])]
             continue
         joints = list(part.joints)
         hull = [joints[k] for k in convex_hull(positions[joints])]
@@ -202,19 +202,16 @@ def find_conflicts(
     return Conflicts(near, blocked, distance)
 
 
-def assign_layers(
-    assembly: Assembly, paths: np.ndarray, sizes: Sizes, chains: dict[int, list[int]] | None = None
-) -> Layout:
+def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """The layer of every part, with as few layers as the search finds.
 
     Layer 0 is the ground's base plate, under the stack of moving parts (layers 1..K). Each
     ground joint's pin stands in the base and reaches up to its highest part; where no order
     of the parts allows that, some pins hang from a cover plate over the stack instead (layer
     K + 1). First an order of the parts that keeps every pin clear is found (or the mechanism
-    cannot be built flat: ValueError), then the fewest layers the search can reach. Bent links
-    and their waypoints' paths come as in `find_conflicts`.
+    cannot be built flat: ValueError), then the fewest layers the search can reach.
     """
-    return stack_layers(assembly, find_conflicts(assembly, paths, sizes, chains), sizes)
+    return stack_layers(assembly, find_conflicts(assembly, paths, sizes), sizes)
 
 
 def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout:
