@@ -178,10 +178,13 @@ def bent_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     stack_layers(assembly, replace(conflicts, blocked=hopeless), sizes)  # or ValueError
     pins: dict[int, set[int]] = {}
     for _ in range(ROUNDS):
+        before = sum(map(len, pins.values()))
         for k, parts in enumerate(conflicts.blocked):
             for q in parts:
                 if passable[k, q]:
                     pins.setdefault(q, set()).add(assembly.pins[k].joint)
+        if pins and sum(map(len, pins.values())) == before:
+            break  # the same pins as the last round: the same routes
         routes = route_links(assembly, paths, pins, reach)
         extended, chains = with_waypoints(assembly, paths, routes)
         conflicts = find_conflicts(assembly, extended, sizes, chains)
