@@ -4,8 +4,9 @@
     result = export_mechanism(mech, Path("out"), {"mjcf", "stl"})
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
-analytic kinematics (`layers`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
-loop closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
+analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
+`routing`), plates become STL meshes (`meshes`) and the bodies, hinges, pins, loop closures and
+crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from linkd.scale import MECHANISM_RANGE_M, size_problem
@@ -23,6 +26,7 @@ from .layers import Layout, assign_layers, plates, sweep
 from .mjcf import build_mjcf, build_scene, qpos_at, servo_gains
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
+from .routing import bent_layers
 
 __all__ = ["FORMATS", "ExportOptions", "ExportResult", "export_mechanism", "hinge_angles",
            "joint_paths", "qpos_at"]  # fmt: skip
@@ -68,12 +72,14 @@ def export_mechanism(
     assembly = assemble(mech)
     sizes, layout = _layered(mech, assembly, options or ExportOptions())
     files: list[Path] = []
-    meshes = _write_meshes(mech, assembly, layout, sizes, out_dir) if "stl" in formats else {}
-    files += [Path(path) for path in meshes.values()]
+    meshes, wholes = {}, {}
+    if "stl" in formats:
+        meshes, wholes = _write_meshes(mech, assembly, layout, sizes, out_dir)
+    files += [Path(path) for path in {*meshes.values(), *wholes.values()}]
     if "mjcf" in formats:
         _write_model(mech, assembly, layout, sizes, meshes, out_dir)
         files += [Path(MODEL), Path(SCENE)]
-    parts = describe_parts(assembly, layout, sizes, meshes)
+    parts = describe_parts(assembly, layout, sizes, wholes, meshes)
     mech.replace(extra={**mech.extra, "layers": layout.count, "parts": parts}).save(
         out_dir / "mechanism.json"
     )
@@ -85,42 +91,54 @@ def export_mechanism(
 def _layered(mech: Mechanism, assembly: Assembly, options: ExportOptions) -> tuple[Sizes, Layout]:
     """Sizes and layers. Where the default link width leaves no flat layering (a part passes
     over a pin whose plates would lie above and below it, in every order), narrower links may
-    leave room: the width, and the sizes derived from it, shrink by the NARROWER factors.
-    Widths the user gave are kept (ValueError then, as when no width works)."""
+    leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
+    no width does, binary links bend around the pins in their way (`routing`), at each width.
+    Widths the user gave are kept (bent links are still tried; ValueError when nothing works)."""
     sizes = resolve_sizes(mech, assembly.parts, options)
-    try:
-        return sizes, assign_layers(assembly, sweep(mech, sizes.link_width), sizes)
-    except ValueError as exc:
-        if options.link_width is not None:
-            raise
-        refusal = exc
-    for factor in NARROWER:
-        narrow = replace(options, link_width=sizes.link_width * factor)
-        try:
-            thin = resolve_sizes(mech, assembly.parts, narrow)
-            return thin, assign_layers(assembly, sweep(mech, thin.link_width), thin)
-        except ValueError:
-            continue
-    raise ValueError(f"{refusal} (links down to {NARROWER[-1]:g} of the usual width tried)")
+    tries = [sizes]
+    if options.link_width is None:
+        narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
+        tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
+    first = None
+    for layering in (assign_layers, bent_layers):
+        for size in tries:
+            try:
+                return size, layering(assembly, sweep(mech, size.link_width), size)
+            except ValueError as exc:
+                first = first or exc
+    widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
+    raise ValueError(f"{first} (straight and bent links{widths} tried)")
 
 
 def _write_meshes(
     mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, out_dir: Path
-) -> dict:
-    """One STL per plate in its body's frame, metres; returns plate name -> relative path."""
-    from .meshes import write_plate
+) -> tuple[dict, dict]:
+    """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
+    convex pieces, which the model collides). Returns the model's mesh name -> relative path,
+    and plate name -> relative path of its whole STL."""
+    from .meshes import bent_mesh, plate_mesh, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
+    size = (sizes.link_width * unit, sizes.hole_diameter * unit, sizes.thickness * unit)
     (out_dir / MESHES).mkdir(exist_ok=True)
-    meshes = {}
+    model, whole = {}, {}
     for plate in plates(assembly, layout):
         points = (mech.positions[list(plate.joints)] - origins[plate.part]) * unit
-        path = f"{MESHES}/{plate.name}.stl"
-        write_plate(out_dir / path, points, sizes.link_width * unit, sizes.hole_diameter * unit,
-                    sizes.thickness * unit)  # fmt: skip
-        meshes[plate.name] = path
-    return meshes
+        whole[plate.name] = f"{MESHES}/{plate.name}.stl"
+        if not plate.bends:
+            write_stl(out_dir / whole[plate.name], *plate_mesh(points, *size), plate.name)
+            model[plate.name] = whole[plate.name]
+            continue
+        chain = np.concatenate([points[:1], (np.array(plate.bends) - origins[plate.part]) * unit,
+                                points[1:]])  # fmt: skip
+        write_stl(out_dir / whole[plate.name], *bent_mesh(chain, *size), plate.name)
+        for k in range(len(chain) - 1):
+            name = f"{plate.name}_bar{k}"
+            model[name] = f"{MESHES}/{name}.stl"
+            bar = plate_mesh(chain[k : k + 2], *size, holes=points[[k == 0, k == len(chain) - 2]])
+            write_stl(out_dir / model[name], *bar, name)
+    return model, whole
 
 
 def _write_model(
@@ -136,14 +154,21 @@ def _write_model(
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
 
 
-def describe_parts(assembly: Assembly, layout: Layout, sizes: Sizes, meshes: dict) -> list[dict]:
-    """JSON descriptions of the plates and pins (sizes in the mechanism's units)."""
+def describe_parts(
+    assembly: Assembly, layout: Layout, sizes: Sizes, wholes: dict, meshes: dict
+) -> list[dict]:
+    """JSON descriptions of the plates and pins (sizes in the mechanism's units); a bent link
+    also has its waypoints (`bends`, assembly pose) and the STL of each bar (`pieces`)."""
     out = []
     for plate in plates(assembly, layout):
         entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
                  "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
-        if plate.name in meshes:
-            entry["mesh"] = meshes[plate.name]
+        if plate.bends:
+            entry["bends"] = [list(point) for point in plate.bends]
+        if plate.name in wholes:
+            entry["mesh"] = wholes[plate.name]
+        if plate.bends and wholes:
+            entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
         out.append(entry)
     for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
         out.append({

@@ -13,8 +13,8 @@ from a cover plate over the stack instead (the two plates are one rigid frame).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from itertools import combinations
+from dataclasses import dataclass, field
+from itertools import combinations, pairwise
 
 import numpy as np
 
@@ -45,6 +45,7 @@ class Layout:
     count: int  # number of layers, base and cover plates included
     min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
     minimal: bool = True  # the search proved that fewer layers cannot work
+    bends: dict[int, np.ndarray] = field(default_factory=dict)  # bent links' waypoints (routing)
 
 
 @dataclass(frozen=True)
@@ -55,6 +56,7 @@ class Plate:
     part: int
     joints: tuple[int, ...]  # joints it has holes for
     layer: int
+    bends: tuple[tuple[float, float], ...] = ()  # waypoints of a bent link, between its joints
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
@@ -64,8 +66,10 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     out = [Plate(ground.name, 0, base, 0)] if base else []
     if layout.top_joints:
         out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1))
-    moving = enumerate(assembly.parts[1:], start=1)
-    return out + [Plate(part.name, p, part.joints, int(layout.layers[p])) for p, part in moving]
+    for p, part in enumerate(assembly.parts[1:], start=1):
+        bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
+        out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
+    return out
 
 
 @dataclass(frozen=True)
@@ -117,13 +121,20 @@ def segment_distance(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndar
     return np.where(crossing, 0.0, d)
 
 
-def hull_edges(assembly: Assembly, positions: np.ndarray) -> list[tuple[int, int, int]]:
-    """(part, joint, next joint) along each part's hull in the assembly pose, counter-clockwise.
+def hull_edges(
+    assembly: Assembly, positions: np.ndarray, chains: dict[int, list[int]] | None = None
+) -> list[tuple[int, int, int]]:
+    """(part, point, next point) along each part's hull in the assembly pose, counter-clockwise,
+    or along its chain of bars (a bent link: `chains` maps it to its points, in order).
 
     A two-joint hull is one segment, a one-joint hull a point (a segment of zero length).
     """
+    chains = chains or {}
     edges = []
     for p, part in enumerate(assembly.parts):
+        if p in chains:
+            edges += [(p, a, b) for a, b in pairwise(chains[p])]
+            continue
         joints = list(part.joints)
         hull = [joints[k] for k in convex_hull(positions[joints])]
         if len(hull) <= 2:
@@ -144,15 +155,19 @@ def sweep(mech: Mechanism, width: float) -> np.ndarray:
     return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
 
 
-def find_conflicts(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Conflicts:
+def find_conflicts(
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes, chains: dict[int, list[int]] | None = None
+) -> Conflicts:
     """Moving part pairs that may not share a layer, and the parts each pin's span must avoid.
 
-    paths: (N, T, 2) joint positions over the sweep. Distances are between joint hulls, which
-    the plates cover with half a width to spare; the largest joint step between two sampled
-    angles is added to each margin, so what happens between samples is covered too.
+    paths: (N, T, 2) joint positions over the sweep, then the waypoints of bent links, whose
+    outlines are the open `chains` of points. Distances are between joint hulls (or chains),
+    which the plates cover with half a width to spare; the largest point step between two
+    sampled angles is added to each margin, so what happens between samples is covered too.
     """
+    chains = chains or {}
     n_parts, n_joints = len(assembly.parts), len(paths)
-    edges = hull_edges(assembly, paths[:, 0])
+    edges = hull_edges(assembly, paths[:, 0], chains)
     owner = np.array([e[0] for e in edges])
     points = paths[..., 0] + 1j * paths[..., 1]  # (N, T)
     start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]  # (E, T)
@@ -167,11 +182,11 @@ def find_conflicts(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Confl
     np.minimum.at(to_part, (np.arange(n_joints)[:, None], owner[None, :]), joint_gap)
     for q in range(n_parts):
         mine = owner == q
-        if mine.sum() >= 3:  # a polygon: a joint inside it is at distance 0
+        if mine.sum() >= 3 and q not in chains:  # a polygon: a joint inside it is at distance 0
             left = _cross(start[mine][None], end[mine][None], points[:, None]) >= 0  # (N, e, T)
             to_part[left.all(1).any(-1), q] = 0.0
     for p, part in enumerate(assembly.parts):
-        inside = to_part[list(part.joints)].min(0)  # a vertex of p inside q
+        inside = to_part[chains.get(p, list(part.joints))].min(0)  # a vertex of p inside q
         distance[p] = np.minimum(distance[p], inside)
         distance[:, p] = np.minimum(distance[:, p], inside)
     step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
@@ -196,7 +211,11 @@ def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     K + 1). First an order of the parts that keeps every pin clear is found (or the mechanism
     cannot be built flat: ValueError), then the fewest layers the search can reach.
     """
-    conflicts = find_conflicts(assembly, paths, sizes)
+    return stack_layers(assembly, find_conflicts(assembly, paths, sizes), sizes)
+
+
+def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout:
+    """The layers of `assign_layers` for given conflicts (ValueError as there)."""
     moving = conflicts.parts[1:, 1:]
     pins = [
         ([m - 1 for m in pin.members if m], [b - 1 for b in blocked])

@@ -3,11 +3,13 @@
 manifold3d does the 2D hull, the holes and the extrusion, and guarantees a closed 2-manifold;
 the binary STL is a few lines of numpy (trimesh, which the tests use to check the files, would
 cost seconds of import time here). Plates are convex apart from their holes, which is also the
-shape MuJoCo collides (the convex hull of a mesh).
+shape MuJoCo collides (the convex hull of a mesh). A bent link (`routing`) is not convex: it
+is written whole, to be made in one piece, and bar by bar, each bar convex, for MuJoCo.
 """
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -17,18 +19,47 @@ STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attr
 
 
 def plate_mesh(
-    points: np.ndarray, width: float, hole_diameter: float, thickness: float
+    points: np.ndarray,
+    width: float,
+    hole_diameter: float,
+    thickness: float,
+    holes: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and triangles (F, 3) of a plate through `points` (k, 2), z in [0, t]."""
+    """Vertices (V, 3) and triangles (F, 3) of a plate through `points` (k, 2), z in [0, t],
+    with pin holes at `holes` (all the points by default)."""
     import manifold3d
 
-    def discs(radius: float) -> list:
-        circle = manifold3d.CrossSection.circle(radius, SEGMENTS)
-        return [circle.translate((float(x), float(y))) for x, y in points]
+    outline = manifold3d.CrossSection.batch_hull(_discs(points, width / 2))
+    return _solid(outline, points if holes is None else holes, hole_diameter, thickness)
 
-    outline = manifold3d.CrossSection.batch_hull(discs(width / 2))
-    holes = manifold3d.CrossSection.batch_boolean(discs(hole_diameter / 2), manifold3d.OpType.Add)
-    solid = (outline - holes).extrude(thickness)
+
+def bent_mesh(
+    chain: np.ndarray, width: float, hole_diameter: float, thickness: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """A bent link through the points of `chain` (k, 2): one bar (the hull of two discs) per
+    pair of neighbours, joined, with pin holes at the two ends; z in [0, t]."""
+    import manifold3d
+
+    discs = _discs(chain, width / 2)
+    bars = [manifold3d.CrossSection.batch_hull(pair) for pair in itertools.pairwise(discs)]
+    outline = manifold3d.CrossSection.batch_boolean(bars, manifold3d.OpType.Add)
+    return _solid(outline, chain[[0, -1]], hole_diameter, thickness)
+
+
+def _discs(points: np.ndarray, radius: float) -> list:
+    import manifold3d
+
+    circle = manifold3d.CrossSection.circle(radius, SEGMENTS)
+    return [circle.translate((float(x), float(y))) for x, y in points]
+
+
+def _solid(outline, holes: np.ndarray, hole_diameter: float, thickness: float) -> tuple:
+    """The outline minus holes at `holes`, extruded to `thickness`, as vertices and triangles."""
+    import manifold3d
+
+    for disc in _discs(holes, hole_diameter / 2):
+        outline = outline - disc
+    solid = outline.extrude(thickness)
     if solid.status() != manifold3d.Error.NoError or not solid.volume() > 0:
         raise ValueError("the plate is not a closed solid (are its holes wider than the plate?)")
     mesh = solid.to_mesh()
@@ -46,10 +77,3 @@ def write_stl(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str = "
     with open(path, "wb") as handle:
         handle.write(header + np.uint32(len(faces)).tobytes())
         handle.write(records.tobytes())
-
-
-def write_plate(
-    path: Path, points: np.ndarray, width: float, hole: float, thickness: float
-) -> None:
-    """Write a plate (sizes in metres) as a binary STL."""
-    write_stl(path, *plate_mesh(points, width, hole, thickness), name=f"linkd {path.stem}")

@@ -20,6 +20,7 @@ few iterations.
 
 from __future__ import annotations
 
+import itertools
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
@@ -102,18 +103,26 @@ class _Builder:
             self.plate(moving[h.child], meshes)
 
     def plate(self, plate: Plate, meshes: dict[str, str]) -> None:
-        """A plate on its layer: its mesh, or boxes along its hull and discs at its joints."""
+        """A plate on its layer: its mesh, or boxes along its hull and discs at its joints. A
+        bent link is a chain of bars: a mesh per bar, or boxes with discs at the bends."""
         body = self.bodies[plate.part]
         z = plate.layer * self.pitch
         colour = _fmt(*LAYER_COLOURS[plate.layer % len(LAYER_COLOURS)], 1)
-        if plate.name in meshes:
-            ET.SubElement(body, "geom", name=plate.name, type="mesh", mesh=plate.name,
-                          pos=_fmt(0, 0, z), rgba=colour)  # fmt: skip
-            return
         points = np.array([self.local(plate.part, j) for j in plate.joints])
-        hull = [points[k] for k in convex_hull(points)]
-        sides = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
-        sides = sides if len(hull) > 1 else []  # a lone joint (the ground at one pivot): a boss
+        bends = (np.reshape(plate.bends, (-1, 2)) - self.origin[plate.part]) * self.unit
+        chain = np.concatenate([points[:1], bends, points[1:]]) if plate.bends else points
+        pieces = [f"{plate.name}_bar{k}" for k in range(len(chain) - 1)] if plate.bends else []
+        if plate.name in meshes or (pieces and pieces[0] in meshes):
+            for name in pieces or [plate.name]:
+                ET.SubElement(body, "geom", name=name, type="mesh", mesh=name, pos=_fmt(0, 0, z),
+                              rgba=colour)  # fmt: skip
+            return
+        if plate.bends:
+            sides = list(itertools.pairwise(chain))
+        else:
+            hull = [points[k] for k in convex_hull(points)]
+            sides = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
+            sides = sides if len(hull) > 1 else []  # a lone joint (the ground at one pivot): a boss
         zc = z + self.thickness / 2
         for k, (a, b) in enumerate(sides):
             length = np.linalg.norm(b - a)
@@ -123,8 +132,10 @@ class _Builder:
             ET.SubElement(body, "geom", name=f"{plate.name}_bar{k}", type="box",
                           size=_fmt(length / 2, self.width / 2, self.thickness / 2),
                           pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
-        for j, (x, y) in zip(plate.joints, points):
-            ET.SubElement(body, "geom", name=f"{plate.name}_boss{j}", type="cylinder",
+        discs = [*zip((f"boss{j}" for j in plate.joints), points),
+                 *zip((f"bend{k}" for k in range(len(bends))), bends)]  # fmt: skip
+        for name, (x, y) in discs:
+            ET.SubElement(body, "geom", name=f"{plate.name}_{name}", type="cylinder",
                           size=_fmt(self.width / 2, self.thickness / 2), pos=_fmt(x, y, zc),
                           rgba=colour)  # fmt: skip
 

@@ -49,9 +49,10 @@ def test_refused_at_the_default_width_is_built_with_narrower_links_and_verified(
 def test_a_width_the_user_gives_is_kept(tmp_path):
     from linkd.export import ExportOptions
 
-    width = resolve_sizes(TANGLED, assemble(TANGLED).parts, None).link_width
-    with pytest.raises(ValueError, match="flat layers"):
-        export_mechanism(TANGLED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
+    width = resolve_sizes(KNOTTED, assemble(KNOTTED).parts, None).link_width
+    with pytest.raises(ValueError, match="flat layers") as refusal:
+        export_mechanism(KNOTTED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
+    assert "usual width" not in str(refusal.value)  # no narrower width was tried
 
 
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):

@@ -166,7 +166,7 @@ def generator(args: argparse.Namespace) -> int:
 
 def export(args: argparse.Namespace) -> int:
     """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
-    tangled for flat layers is refused by the export and counted as such."""
+    tangled for flat layers, straight or bent, is refused by the export and counted as such."""
     import tempfile
     from collections import Counter
 
@@ -198,10 +198,12 @@ def export(args: argparse.Namespace) -> int:
         outcome["verified" if report.passed else "failed verification"] += 1
         if report.passed and result.sizes["link_width"] < width:
             outcome["  of which with narrower links"] += 1
+        if report.passed and any("bends" in part for part in result.parts):
+            outcome["  of which with bent links"] += 1
         failed.update(report.failed)
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
-    for name in ("verified", "  of which with narrower links", "failed verification",
-                 "refused (no flat layering)"):  # fmt: skip
+    for name in ("verified", "  of which with narrower links", "  of which with bent links",
+                 "failed verification", "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
             print(f"  {name:28s} {outcome[name]}")
     if failed:
