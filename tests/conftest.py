@@ -2,9 +2,14 @@
 
 import os
 
+import numpy as np
 import pytest
 import torch
 from hypothesis import settings
+
+from linkd.export import export_mechanism
+from linkd.generator import GeneratorSettings, generate
+from linkd.graph import from_graph
 
 # CI (the CI variable set, as CI services and .ci/run do) tests the same examples on every run
 # and keeps no example database; a local run draws new examples each time and replays failures.
@@ -20,3 +25,17 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory):
+    """Small generated designs; the first one can be built in flat layers (not every valid
+    mechanism can: its export is refused)."""
+    graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
+    for k, graph in enumerate(graphs):
+        try:
+            export_mechanism(from_graph(graph), tmp_path_factory.mktemp("export"), set())
+        except ValueError:
+            continue
+        return np.concatenate([graphs[k:], graphs[:k]])
+    raise AssertionError("no exportable design in the pool")

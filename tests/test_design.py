@@ -17,8 +17,6 @@ from linkd.design.pipeline import DesignOptions, design
 from linkd.design.propose import augmented, place, sub_mechanisms
 from linkd.design.refine import RefineSettings
 from linkd.design.select import curve_error, end_effector_path, topology_key
-from linkd.export import export_mechanism
-from linkd.generator import GeneratorSettings, generate
 from linkd.geometry import Similarity, rotation
 from linkd.graph import from_graph, to_graph
 from linkd.mechanism import Mechanism
@@ -27,20 +25,6 @@ from linkd.validator import validate
 # The user's frame: millimetres, turned, mirrored and moved away from the origin.
 USER = Similarity(40.0, rotation(0.7, reflect=True), np.array([100.0, -20.0]))
 QUICK = RefineSettings(iterations=20, ordered_iterations=5)
-
-
-@pytest.fixture(scope="module")
-def pool(tmp_path_factory):
-    """Small generated designs; the first one can be built in flat layers (not every valid
-    mechanism can: its export is refused)."""
-    graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
-    for k, graph in enumerate(graphs):
-        try:
-            export_mechanism(from_graph(graph), tmp_path_factory.mktemp("export"), set())
-        except ValueError:
-            continue
-        return np.concatenate([graphs[k:], graphs[:k]])
-    raise AssertionError("no exportable design in the pool")
 
 
 @pytest.fixture(scope="module")

@@ -19,8 +19,6 @@ from linkd.design.pipeline import DesignOptions, design
 from linkd.design.refine import RefineSettings
 from linkd.design.select import end_effector_path, timing_of
 from linkd.errors import InputError
-from linkd.export import export_mechanism
-from linkd.generator import GeneratorSettings, generate
 from linkd.geometry import Similarity, rotation
 from linkd.graph import from_graph
 from linkd.mechanism import Mechanism
@@ -85,19 +83,6 @@ def test_crank_range_in_mechanism_json(tmp_path):
         (tmp_path / "bad.json").write_text(json.dumps(data))
         with pytest.raises(InputError, match="crank_range"):
             Mechanism.load(tmp_path / "bad.json")
-
-
-@pytest.fixture(scope="module")
-def pool(tmp_path_factory):
-    """Small generated designs, the first exportable in flat layers, first in the pool."""
-    graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
-    for k, graph in enumerate(graphs):
-        try:
-            export_mechanism(from_graph(graph), tmp_path_factory.mktemp("export"), set())
-        except ValueError:
-            continue
-        return np.concatenate([graphs[k:], graphs[:k]])
-    raise AssertionError("no exportable design in the pool")
 
 
 def options(**changes) -> DesignOptions:
