@@ -28,8 +28,8 @@ from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .routing import bent_layers
 
-__all__ = ["FORMATS", "ExportOptions", "ExportResult", "export_mechanism", "hinge_angles",
-           "joint_paths", "qpos_at"]  # fmt: skip
+__all__ = ["FORMATS", "ExportOptions", "ExportResult", "buildable", "export_mechanism",
+           "hinge_angles", "joint_paths", "qpos_at"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
@@ -177,3 +177,14 @@ def describe_parts(
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
         })  # fmt: skip
     return out
+
+
+def buildable(mech: Mechanism, options: ExportOptions | None = None) -> bool:
+    """Whether `export_mechanism` would find sizes and layers for `mech`, without building or
+    writing anything: the design search asks before it spends a round around a design that
+    could never be delivered."""
+    try:
+        _layered(mech, assemble(mech), options or ExportOptions())
+    except ValueError:
+        return False
+    return True

@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkd.batch import LinkageBatch
+from linkd.export import buildable as can_build
+from linkd.geometry import Similarity
 from linkd.validator import validate
 
 from .atlas import DEFAULT_PATH, Atlas
@@ -36,7 +38,7 @@ from .propose import (
 )
 from .refine import RefineSettings, refine
 from .rounds import around
-from .select import diverse_best
+from .select import diverse_best, to_mechanism, topology_key
 from .stages import Stages
 from .stroke import Goal, place_stroke
 from .stroke_refine import refine_stroke
@@ -135,10 +137,14 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
             report["budget_cut_refinement"] = iterations < settings.iterations
             note(f"{len(rows)} designs, {iterations} iterations, "
                  f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        buildable = _buildable()
         for _ in range(rounds - 1):
             with stages.stage("round", "searching around the best designs") as note:
                 nearby = around(candidates, o.around, o.around_copies, o.around_spread,
-                                o.seed + len(candidates))  # fmt: skip
+                                o.seed + len(candidates), buildable)  # fmt: skip
+                if len(nearby) == 0:
+                    note("no design that can be built to search around")
+                    break
                 found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
                 if inner:
                     found = rank(found, inner)
@@ -187,6 +193,20 @@ def _refiner(
         return result.iterations
 
     return refine_rows
+
+
+def _buildable() -> Callable[[LinkageBatch, int], bool]:
+    """Whether a candidate, as it stands, could be exported (layering is the same in any
+    similar frame, so the normalised one serves); remembered per design."""
+    known: dict[bytes, bool] = {}
+
+    def buildable(batch: LinkageBatch, row: int) -> bool:
+        key = topology_key(batch, row) + batch.positions[row].tobytes()
+        if key not in known:
+            known[key] = can_build(to_mechanism(batch, row, Similarity(), "mm"))
+        return known[key]
+
+    return buildable
 
 
 def _progress(stages: Stages, count: int, settings: RefineSettings) -> Callable:
