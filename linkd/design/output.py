@@ -2,8 +2,8 @@
 
 A design is only delivered once the exported model passes every check of `linkd verify` (with a
 finer time step where its loops need one, `linkd.verified`). The MuJoCo model is always exported
-for that proof; when the user did not ask for it, it is removed
-again once the proof is done (the verification figures stay in report.json).
+for that proof; when the user did not ask for it, it is removed again once the proof is done
+(the verification figures stay in report.json).
 """
 
 from __future__ import annotations
