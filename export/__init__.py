@@ -23,13 +23,14 @@ from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
 from .layers import Layout, assign_layers, plates, sweep
-from .mjcf import build_mjcf, build_scene, qpos_at, servo_gains
+from .mjcf import TIMESTEP, build_mjcf, build_scene, qpos_at, retimed, servo_gains
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .routing import bent_layers
 
-__all__ = ["FORMATS", "ExportOptions", "ExportResult", "buildable", "export_mechanism",
-           "hinge_angles", "joint_paths", "qpos_at"]  # fmt: skip
+__all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
+           "export_mechanism", "hinge_angles", "joint_paths", "qpos_at",
+           "set_timestep"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
@@ -152,6 +153,13 @@ def _write_model(
     servo = servo_gains(mujoco.MjModel.from_xml_path(str(path)), mech)
     path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
+
+
+def set_timestep(out_dir: Path, timestep: float) -> None:
+    """Write OUT/mechanism.xml again with another time step: stiffer loop closures for a model
+    whose loops the default step leaves too soft (see `linkd.verified`)."""
+    path = Path(out_dir) / MODEL
+    path.write_text(retimed(path.read_text(), timestep))
 
 
 def describe_parts(

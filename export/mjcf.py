@@ -11,11 +11,12 @@ time constant of two time steps (`solref`) with impedance near 1 (`solimp` 0.999
 0.5 ms, a 2 s motor revolution of the Jansen leg keeps its loops closed to 8e-8 of its shortest
 link (the contract asks 1e-6; at 1 ms it is 3e-7, at 2 ms 1.3e-6), but random mechanisms close
 to a toggle pose reached 1.2e-6 (2 of 62 in `linkd bench export`), so the step is 0.25 ms, which
-brings those to 3e-7; implicitfast needs 50 us and runs five times slower. The crank servo is
-critically damped at 10 Hz for the largest inertia the crank drives, and the crank hinge
-carries a rotor inertia of that size: without it a light crank's own mode under the servo is
-too fast for RK4 (see `servo_gains`). The Newton solver with a tight tolerance converges in a
-few iterations.
+brings those to 3e-7; implicitfast needs 50 us and runs five times slower. A model that still
+misses the tolerances at that step is written again with a finer one (`retimed`; the step is
+chosen by `linkd.verified`). The crank servo is critically damped at 10 Hz for the largest
+inertia the crank drives, and the crank hinge carries a rotor inertia of that size: without it
+a light crank's own mode under the servo is too fast for RK4 (see `servo_gains`). The Newton
+solver with a tight tolerance converges in a few iterations.
 """
 
 from __future__ import annotations
@@ -32,8 +33,7 @@ from .layers import Layout, Plate, convex_hull, plates
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
-TIMESTEP = 2.5e-4  # s
-SOLREF = (2 * TIMESTEP, 1.0)  # loop-closure time constant (two steps) and damping ratio
+TIMESTEP = 2.5e-4  # s, the default
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
 MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
@@ -171,7 +171,7 @@ def build_mjcf(
     default = ET.SubElement(root, "default")
     ET.SubElement(default, "joint", type="hinge", axis="0 0 1")
     ET.SubElement(default, "geom", density=_fmt(sizes.density))
-    ET.SubElement(default, "equality", solref=_fmt(*SOLREF), solimp=_fmt(*SOLIMP))
+    ET.SubElement(default, "equality", solref=_fmt(*solref(TIMESTEP)), solimp=_fmt(*SOLIMP))
     ET.SubElement(default, "site", size=_fmt(SITE_RADIUS * b.width), rgba="0.9 0.1 0.1 1")
     if meshes:
         asset = ET.SubElement(root, "asset")
@@ -196,6 +196,21 @@ def build_mjcf(
     actuator = ET.SubElement(root, "actuator")
     ET.SubElement(actuator, "position", name="motor", joint=CRANK, kp=_fmt(servo.kp),
                   kv=_fmt(servo.kv), ctrllimited="false")  # fmt: skip
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def solref(timestep: float) -> tuple[float, float]:
+    """The loop closures' time constant, at MuJoCo's floor of two steps, and damping ratio."""
+    return 2 * timestep, 1.0
+
+
+def retimed(xml: str, timestep: float) -> str:
+    """The model text `build_mjcf` wrote, with another time step and the loop closures kept at
+    two steps (the same text when the step is the same)."""
+    root = ET.fromstring(xml)
+    root.find("option").set("timestep", _fmt(timestep))
+    root.find("default/equality").set("solref", _fmt(*solref(timestep)))
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
 

@@ -17,11 +17,13 @@ def test_export_writes_the_output_folder(tmp_path, capsys):
     names = {p.name for p in out.iterdir()}
     assert {"mechanism.json", "mechanism.xml", "scene.xml", "meshes", "animation.html",
             "curve.png", "report.json"} <= names  # fmt: skip
-    report = json.loads((out / "report.json").read_text())["export"]
+    full = json.loads((out / "report.json").read_text())
+    report = full["export"]
     saved = json.loads((out / "mechanism.json").read_text())
     assert report["layers"] == saved["layers"]
     assert report["parts"] == {"ground": 1, "link": 2, "plate": 1, "pin": 4}
-    assert "layers" in capsys.readouterr().out
+    assert full["verification"]["passed"]  # the model written, proved as `linkd verify` does
+    assert "verified in MuJoCo" in capsys.readouterr().out
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging left
 
 
@@ -31,6 +33,7 @@ def test_export_replaces_its_own_output_and_refuses_other_folders(tmp_path):
     assert main(["export", mech, "--out", str(out), "--export", "mjcf"]) == 0
     assert main(["export", mech, "--out", str(out), "--export", "stl"]) == 0
     assert (out / "meshes").is_dir() and not (out / "mechanism.xml").exists()
+    assert "verification" not in json.loads((out / "report.json").read_text())  # no model
     other = tmp_path / "notes"
     other.mkdir()
     (other / "keep.txt").write_text("mine")

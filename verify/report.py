@@ -35,6 +35,10 @@ class Report:
         """Names of the checks that did not pass."""
         return [c.name for c in self.checks if not c.passed]
 
+    def check(self, name: str) -> Check:
+        """The check named `name` (one of runner.CHECKS)."""
+        return next(c for c in self.checks if c.name == name)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "passed": self.passed,

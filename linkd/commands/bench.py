@@ -172,13 +172,13 @@ def export(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from linkd.export import export_mechanism
+    from linkd.export import TIMESTEP
     from linkd.export.options import resolve_sizes
     from linkd.export.parts import assemble
     from linkd.generator import generate
     from linkd.geometry import Similarity
     from linkd.graph import from_graph
-    from linkd.verify import verify_output
+    from linkd.verified import export_verified
 
     graphs = generate(args.count, args.seed).graphs
     outcome, failed, layers, seconds = Counter(), Counter(), [], []
@@ -188,11 +188,10 @@ def export(args: argparse.Namespace) -> int:
         with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
             start = time.perf_counter()
             try:
-                result = export_mechanism(mech, Path(out), {"mjcf", "stl"})
+                result, report = export_verified(mech, Path(out), {"mjcf", "stl"})
             except ValueError:
                 outcome["refused (no flat layering)"] += 1
                 continue
-            report = verify_output(out, write=False)
             seconds.append(time.perf_counter() - start)
         layers.append(result.layers)
         outcome["verified" if report.passed else "failed verification"] += 1
@@ -200,10 +199,13 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which with narrower links"] += 1
         if report.passed and any("bends" in part for part in result.parts):
             outcome["  of which with bent links"] += 1
+        if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
+            outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
-                 "failed verification", "refused (no flat layering)"):  # fmt: skip
+                 "  of which with a finer step", "failed verification",
+                 "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
             print(f"  {name:28s} {outcome[name]}")
     if failed:

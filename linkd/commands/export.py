@@ -21,7 +21,9 @@ SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "
 
 EPILOG = """\
 The MuJoCo model and the STL parts are in metres whatever the mechanism's units.
-Part sizes not given are chosen from the mechanism's size. OUT appears only
+Part sizes not given are chosen from the mechanism's size. The model is verified
+as `linkd verify` does (report.json "verification"), with a finer time step where
+its loops need one. OUT appears only
 when complete; an earlier linkd result there is replaced, any other non-empty
 folder is refused unless --force.
 
@@ -58,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from linkd.export.options import resolve_sizes
     from linkd.export.parts import rigid_parts
     from linkd.validator import validate_mechanism
+    from linkd.verified import export_verified
 
     start = time.perf_counter()
     formats = parse_formats(args.export)
@@ -76,15 +79,26 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else fresh_name(Path(f"{Path(args.mechanism).stem}-export"))
     try:
         with staged_output(out, args.force) as stage:
-            result = export_mechanism(mech, stage, formats, options)
-            timings = {"export_s": result.seconds, **_extras(mech, stage)}
+            begun = time.perf_counter()
+            if "mjcf" in formats:  # proved in MuJoCo, which also settles the model's time step
+                result, verification = export_verified(mech, stage, formats, options)
+            else:
+                result, verification = export_mechanism(mech, stage, formats, options), None
+            timings = {"export_s": result.seconds}
+            if verification:
+                timings["verify_s"] = time.perf_counter() - begun - result.seconds
+            timings |= _extras(mech, stage)
             timings["total_s"] = time.perf_counter() - start
-            write_atomic(stage / "report.json", json.dumps(_report(result, timings), indent=2))
+            report = _report(result, verification, timings)
+            write_atomic(stage / "report.json", json.dumps(report, indent=2))
     except ValueError as exc:
         print(f"{args.mechanism}: cannot export: {exc}")
         return 1
     kinds = ", ".join(f"{n} {kind}" for kind, n in _counts(result.parts).items())
     print(f"{out}: {result.layers} layers; parts: {kinds}; exported in {result.seconds:.2f} s")
+    if verification:
+        failed = ", ".join(verification.failed)
+        print("  verified in MuJoCo" if verification.passed else f"  failed verification: {failed}")
     return 0
 
 
@@ -110,8 +124,8 @@ def _counts(parts: list[dict]) -> dict[str, int]:
     return counts
 
 
-def _report(result, timings: dict[str, float]) -> dict:
-    return {
+def _report(result, verification, timings: dict[str, float]) -> dict:
+    report = {
         "export": {
             "layers": result.layers,
             "layers_minimal": result.minimal,
@@ -120,5 +134,7 @@ def _report(result, timings: dict[str, float]) -> dict:
             "sizes": result.sizes,
             "files": [str(f) for f in result.files],
         },
-        "timings": timings,
     }
+    if verification:
+        report["verification"] = verification.to_dict()
+    return {**report, "timings": timings}

@@ -1,8 +1,9 @@
 """Deliver designs: export each one, prove it in MuJoCo, and write the files of the output folder.
 
-A design is only delivered once the exported model passes every check of `linkd verify`. The
-MuJoCo model is always exported for that proof; when the user did not ask for it, it is removed
-again once the proof is done (the verification figures stay in report.json).
+A design is only delivered once the exported model passes every check of `linkd verify` (with a
+finer time step where its loops need one, `linkd.verified`). The MuJoCo model is always exported
+for that proof; when the user did not ask for it, it is removed again once the proof is done
+(the verification figures stay in report.json).
 """
 
 from __future__ import annotations
@@ -15,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from linkd.export import ExportResult, export_mechanism
+from linkd.export import ExportResult
 from linkd.mechanism import Mechanism
 from linkd.outdir import write_atomic
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
-from linkd.verify import Report, verify_output, write_animation, write_curve_plot
+from linkd.verified import export_verified
+from linkd.verify import Report, write_animation, write_curve_plot
 from linkd.verify.animation import parts_from_model
 
 from .select import Measures, measure
@@ -61,12 +63,11 @@ def deliver(
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
     try:
-        export = export_mechanism(mech, folder, set(formats) | {"mjcf"})
+        export, report = export_verified(mech, folder, set(formats) | {"mjcf"})
     except ValueError:
         _empty(folder)
         skipped["unbuildable"] += 1
         return None
-    report = verify_output(folder)
     if not report.passed:
         _empty(folder)
         skipped["failed_verification"] += 1
