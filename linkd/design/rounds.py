@@ -46,7 +46,7 @@ def around(
             break
         if buildable(candidates.batch, int(row)):
             best.append(int(row))
-    rows = np.repeat(best, copies)
+    rows = np.repeat(np.array(best, dtype=int), copies)
     batch = candidates.batch.subset(rows)
     rng = np.random.default_rng(seed)
     scale = spread * np.resize([0.25, 0.5, 1.0], len(rows))[:, None, None]

@@ -1,0 +1,34 @@
+"""Later rounds search around designs the export can build (linkd.design.rounds)."""
+
+import numpy as np
+from test_export_narrow import KNOTTED, TANGLED
+
+from linkd.batch import LinkageBatch
+from linkd.design.propose import Candidates
+from linkd.design.rounds import around
+from linkd.design.search import _buildable
+from linkd.design.select import topology_key
+from linkd.export import buildable
+
+
+def test_buildable_says_what_export_would_do():
+    assert buildable(TANGLED)  # at a narrower width
+    assert not buildable(KNOTTED)  # refused at every width, straight or bent
+
+
+def test_rounds_pass_over_a_better_design_that_cannot_be_built():
+    batch = LinkageBatch.from_mechanisms([KNOTTED, TANGLED])
+    candidates = Candidates(batch, np.array([0.1, 0.2]))  # the refused one ranks first
+    check = _buildable()
+    nearby = around(candidates, count=2, copies=3, spread=0.1, seed=0, buildable=check)
+    assert len(nearby) == 3
+    tangled = topology_key(batch, 1)
+    assert all(topology_key(nearby, row) == tangled for row in range(len(nearby)))
+    # Without the check, the refused design's neighbourhood is searched first.
+    unchecked = around(candidates, count=2, copies=3, spread=0.1, seed=0)
+    assert topology_key(unchecked, 0) == topology_key(batch, 0)
+
+
+def test_no_round_when_nothing_can_be_built():
+    candidates = Candidates(LinkageBatch.from_mechanisms([KNOTTED]), np.array([0.1]))
+    assert len(around(candidates, 4, 3, 0.1, 0, _buildable())) == 0
