@@ -48,6 +48,9 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
         assert 5 <= row["nodes"] <= 6 and row["seconds"] > 0
     assert "verified        100.0%" in summary_table(total)
     assert total["found_by"] == {"model": 2}  # the only source here
+    skips = sum(sum(row["skipped"].values()) for row in results["curves"])
+    assert sum(total["skipped"].values()) == skips and total["best_skipped"] <= min(skips, 2)
+    assert "best designs passed over" in summary_table(total)
     assert total["stages"]["model, placed"] >= total["stages"]["+ atlas, placed"]
 
 

@@ -32,6 +32,7 @@ from linkd.constraints import Box, Constraints, check
 from linkd.curves import read_curve, read_path, resample, write_curve
 from linkd.errors import InputError
 
+from .output import SKIP_REASONS
 from .pipeline import DesignOptions, design
 from .propose import Proposer
 from .search import search_width
@@ -176,6 +177,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "seconds": seconds,
         "found_by": outcome.report["search"].get("found_by"),
         "sources": outcome.report["search"].get("sources", {}),
+        "skipped": dict(outcome.report["search"].get("skipped", {})),
     }
     if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
         points, _ = read_path(file, "open")
@@ -187,7 +189,8 @@ def _refused_row(file: Path, reason: str, seconds: float) -> dict:
     keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation",
             "timing_error", "found_by")  # fmt: skip
     return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
-            "verified": False, "seconds": seconds, "sources": {}, "reason": reason}  # fmt: skip
+            "verified": False, "seconds": seconds, "sources": {}, "skipped": {},
+            "reason": reason}  # fmt: skip
 
 
 def stroke_deviation(mech, target: np.ndarray, samples: int = 2000) -> float:
@@ -223,6 +226,8 @@ def totals(rows: list[dict]) -> dict:
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
         **_held(rows),
+        "skipped": {why: sum(r["skipped"].get(why, 0) for r in rows) for why in SKIP_REASONS},
+        "best_skipped": sum(any(r["skipped"].values()) for r in rows),
         "found_by": {name: sum(r["found_by"] == name for r in rows)
                      for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
         "stages": stages(rows),
@@ -301,6 +306,8 @@ def summary_table(total: dict) -> str:
                          f"median {_fmt(t['timing_error_median'], '.4f')}"),
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
+        ("skipped", f"{t['best_skipped']} curves' best designs passed over: "
+                    + ", ".join(f"{k} {v}" for k, v in t["skipped"].items())),
         ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
         ("stages", ", ".join(f"{k} {v:.4f}" for k, v in t["stages"].items()) or "-"),
     ]  # fmt: skip
