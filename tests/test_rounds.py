@@ -6,7 +6,7 @@ from test_export_narrow import KNOTTED, TANGLED
 from linkd.batch import LinkageBatch
 from linkd.design.propose import Candidates
 from linkd.design.rounds import around
-from linkd.design.search import _buildable
+from linkd.design.search import _buildable, search_width
 from linkd.design.select import topology_key
 from linkd.export import buildable
 
@@ -32,3 +32,9 @@ def test_rounds_pass_over_a_better_design_that_cannot_be_built():
 def test_no_round_when_nothing_can_be_built():
     candidates = Candidates(LinkageBatch.from_mechanisms([KNOTTED]), np.array([0.1]))
     assert len(around(candidates, 4, 3, 0.1, 0, _buildable())) == 0
+
+
+def test_a_longer_budget_searches_wider_unless_told():
+    assert search_width(30, None, None) == (2, 1024, 32)  # the defaults
+    assert search_width(120, None, None) == (5, 4096, 80)
+    assert search_width(120, 1, 10, 4) == (1, 10, 4)

@@ -56,13 +56,18 @@ class NoDesign(Exception):
 
 
 def search_width(
-    time_budget: float, rounds: int | None, atlas_paths: int | None
-) -> tuple[int, int]:
-    """Refinement rounds and atlas paths for the time budget, where not given: two rounds and
-    1024 paths for the default 30 s, one round and 1024 paths more for every further 30 s. (The
-    budget's deadline still stops refinement early on a slow or busy machine.)"""
+    time_budget: float,
+    rounds: int | None,
+    atlas_paths: int | None,
+    refine_count: int | None = None,
+) -> tuple[int, int, int]:
+    """Refinement rounds, atlas paths and designs refined per round for the time budget, where
+    not given: two rounds, 1024 paths and 32 designs for the default 30 s; one round, 1024 paths
+    and 16 designs more for every further 30 s (wider rounds reach basins that longer ones
+    around the same few designs do not). The budget's deadline still stops refinement early on
+    a slow or busy machine."""
     steps = max(1, round(time_budget / 30))
-    return rounds or 1 + steps, atlas_paths or 1024 * steps
+    return rounds or 1 + steps, atlas_paths or 1024 * steps, refine_count or 16 * (1 + steps)
 
 
 def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
@@ -72,9 +77,10 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     target: its stroke's Chamfer distance, or its timing error). Fills `report`."""
     stroke = not goal.closed or goal.timed
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
-    rounds, atlas_paths = search_width(o.time_budget, o.rounds, o.atlas_paths)
+    rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
+                                                     o.refine_count)
     rounds = 1 if stroke else rounds  # searching around the best works on closed loops
-    report["rounds"] = rounds
+    report["rounds"], report["refine_count"] = rounds, refine_count
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         report["proposer"] = o.proposer
         if proposer is None and o.proposer == "random":
@@ -131,7 +137,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         refine_rows = _refiner(goal, target, stroke, settings, inner, deadline)
         with stages.stage("refine", "refining the best designs") as note:
             rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
-                                         o.refine_count, o.per_topology), int)  # fmt: skip
+                                         refine_count, o.per_topology), int)  # fmt: skip
             iterations = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
             report["refine_iterations"] = iterations
             report["budget_cut_refinement"] = iterations < settings.iterations
@@ -152,7 +158,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                 candidates = merged(candidates, found)
                 placed = np.concatenate([placed, found.chamfer])
                 rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
-                                                     o.refine_count, o.refine_count), int)
+                                                     refine_count, refine_count), int)
                 done = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
                 note(f"{len(rows)} designs, {done} iterations, "
                      f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
