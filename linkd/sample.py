@@ -20,6 +20,7 @@ from linkd.batch import LinkageBatch
 from linkd.errors import InputError
 from linkd.graph import ADJ, FEATURES, MAX_NODES, TYPE, VALID, XY
 from linkd.model import LinkD, load_checkpoint
+from linkd.model.frame import principal_turn, turned
 from linkd.validator import N_ANGLES, Validation, check_new_node, validate
 
 STRATEGIES = ("oneshot", "graph", "node")
@@ -203,8 +204,10 @@ def sample(
         raise InputError(f"curves must be (C, points, 2), got {curves.shape}")
     device = next(model.parameters()).device
     generator = torch.Generator(device).manual_seed(seed)
+    curves = torch.as_tensor(curves, device=device)
+    turn = principal_turn(curves) if model.config.canonical else None
     with torch.inference_mode():
-        cond = model.encode(torch.as_tensor(curves, device=device))
+        cond = model.encode(curves if turn is None else curves @ turn.transpose(1, 2))
     cond = cond.repeat_interleave(per_curve, 0)
     curve_index = np.repeat(np.arange(len(curves)), per_curve)
     chunks = range(0, len(cond), CHUNK)
@@ -231,7 +234,11 @@ def sample(
                 advance()
             graphs.append(g)
             valid.append(ok)
-    return Samples(np.concatenate(graphs).astype(np.float32), curve_index, np.concatenate(valid))
+    graphs = np.concatenate(graphs).astype(np.float32)
+    if turn is not None:  # back from the principal frame into the curve's own
+        back = turn.transpose(1, 2).cpu()[torch.as_tensor(curve_index)]  # R^T undoes R
+        graphs = turned(torch.as_tensor(graphs), back).numpy()
+    return Samples(graphs, curve_index, np.concatenate(valid))
 
 
 class _progress:

@@ -71,6 +71,11 @@ PRESETS = {
         model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
         max_steps=14_000, lr=3e-4, warmup=100, eval_every=3500, sub_mechanisms=0.5,
     ),
+    # Continues a `cpu-sub` run (--init) in the curve's principal frame (`linkd.model.frame`).
+    "cpu-canonical": TrainConfig(
+        model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5, canonical=True),
+        max_steps=12_000, lr=3e-4, warmup=100, eval_every=3000, sub_mechanisms=0.5,
+    ),
     "cuda": TrainConfig(
         model=LinkDConfig(
             dim=384, layers=8, heads=8, encoder_layers=4, head_widths=(512, 256, 128),

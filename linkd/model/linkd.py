@@ -18,6 +18,7 @@ from linkd.graph import ADJ, FEATURES, MAX_NODES, TYPE, VALID, XY
 from linkd.model.backbone import CausalBackbone
 from linkd.model.diffusion import DenoiseUNet, cosine_alpha_bar, ddim_sample
 from linkd.model.encoder import CurveEncoder
+from linkd.model.frame import principal_turn, turned
 
 BINARY = torch.tensor([k not in (2, 3) for k in range(FEATURES)])
 
@@ -40,6 +41,7 @@ class LinkDConfig:
     curve_dropout: float = 0.0  # training: share of graphs shown the null curve (for guidance)
     guidance: float = 1.0  # default classifier-free guidance scale at inference (1: none)
     sample_coins: bool = True  # draw validity and type as coins (False: deterministic DDIM)
+    canonical: bool = False  # read curves and place joints in the curve's principal frame
 
 
 def link_mask(index: torch.Tensor) -> torch.Tensor:
@@ -93,9 +95,13 @@ class LinkD(nn.Module):
         """Teacher-forced loss of (B, 20, 24) graphs given (B, 200, 2) curves.
 
         Every valid node and the first padding row (the stop signal) is a target; each is
-        noised at `draws` random timesteps (the head is cheap next to the transformer).
+        noised at `draws` random timesteps (the head is cheap next to the transformer). A
+        canonical model first turns graph and curve into the curve's principal frame.
         """
         c = self.config
+        if c.canonical:
+            turn = principal_turn(curves)
+            graphs, curves = turned(graphs, turn), curves @ turn.transpose(1, 2)
         cond = self.encoder(curves)
         if self.training:  # (always in the graph, so every rank's DDP sees the parameter)
             drop = torch.rand(len(cond), device=cond.device) < c.curve_dropout
