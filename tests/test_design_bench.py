@@ -52,6 +52,12 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
     assert sum(total["skipped"].values()) == skips and total["best_skipped"] <= min(skips, 2)
     assert "best designs passed over" in summary_table(total)
     assert total["stages"]["model, placed"] >= total["stages"]["+ atlas, placed"]
+    # the median of each stage's seconds, over the curves' own timings
+    assert set(total["stage_seconds"]) >= {"propose", "align", "verify"}
+    proposing = [row["timings"]["propose_s"] for row in results["curves"]]
+    assert total["stage_seconds"]["propose"] == pytest.approx(np.median(proposing))
+    line = next(x for x in summary_table(total).splitlines() if x.startswith("stage seconds"))
+    assert f"propose {total['stage_seconds']['propose']:.1f}" in line
 
 
 def test_bench_counts_a_refused_curve_and_goes_on(tmp_path):

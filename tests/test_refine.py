@@ -110,3 +110,13 @@ def test_refinement_keeps_the_input_when_it_cannot_improve_validly():
     assert not result.ok[0] and np.isinf(result.chamfer[0])
     np.testing.assert_array_equal(result.positions, batch.positions)
     assert to_mechanism(batch, 0, frame, "mm").n_nodes == mech.n_nodes
+
+
+def test_the_error_reported_is_the_finely_traced_one_whatever_the_early_iterations_used():
+    batch, target, _ = _perturbed(classic.crank_rocker(), copies=3, noise=0.03)
+    coarse = RefineSettings(iterations=20, ordered_iterations=20, ordered_angles=16)
+    result = refine(batch, target, coarse)
+    assert result.ok.all()
+    batch.positions = result.positions
+    measured = refine(batch, target, RefineSettings(iterations=0)).chamfer
+    np.testing.assert_allclose(result.chamfer, measured, rtol=1e-5)

@@ -52,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
     d.add_argument("--proposer", default="model", choices=("model", "random"),
                    help="candidates from LinkD or from the curve-blind generator")  # fmt: skip
-    d.add_argument("--guidance", type=float, help="LinkD guidance scale (default: the model's)")
+    d.add_argument("--guidance", type=float,
+                   help="LinkD guidance scale (default: 1, as in `linkd design`)")  # fmt: skip
     d.add_argument("--json", help="also write the figures to this JSON file")
     d.add_argument("--setup", default="plain",
                    choices=("plain", "user", "constrained", "no-motor"),

@@ -178,6 +178,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "found_by": outcome.report["search"].get("found_by"),
         "sources": outcome.report["search"].get("sources", {}),
         "skipped": dict(outcome.report["search"].get("skipped", {})),
+        "timings": dict(outcome.report.get("timings", {})),
     }
     if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
         points, _ = read_path(file, "open")
@@ -190,7 +191,7 @@ def _refused_row(file: Path, reason: str, seconds: float) -> dict:
             "timing_error", "found_by")  # fmt: skip
     return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
             "verified": False, "seconds": seconds, "sources": {}, "skipped": {},
-            "reason": reason}  # fmt: skip
+            "timings": {}, "reason": reason}  # fmt: skip
 
 
 def stroke_deviation(mech, target: np.ndarray, samples: int = 2000) -> float:
@@ -225,6 +226,7 @@ def totals(rows: list[dict]) -> dict:
         "seconds_mean": stat("seconds", np.mean),
         "seconds_median": stat("seconds", np.median),
         "seconds_max": stat("seconds", np.max),
+        "stage_seconds": stage_seconds(rows),
         **_held(rows),
         "skipped": {why: sum(r["skipped"].get(why, 0) for r in rows) for why in SKIP_REASONS},
         "best_skipped": sum(any(r["skipped"].values()) for r in rows),
@@ -232,6 +234,14 @@ def totals(rows: list[dict]) -> dict:
                      for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
         "stages": stages(rows),
     }
+
+
+def stage_seconds(rows: list[dict]) -> dict:
+    """Median seconds of each stage of `linkd design` over the curves that ran it."""
+    names = dict.fromkeys(k for r in rows for k in r["timings"] if k != "total_s")
+    return {k.removesuffix("_s"): float(np.median([r["timings"][k] for r in rows
+                                                   if k in r["timings"]]))
+            for k in names}  # fmt: skip
 
 
 def _held(rows: list[dict]) -> dict:
@@ -306,6 +316,8 @@ def summary_table(total: dict) -> str:
                          f"median {_fmt(t['timing_error_median'], '.4f')}"),
         ("seconds", f"mean {_fmt(t['seconds_mean'], '.1f')}, median "
                     f"{_fmt(t['seconds_median'], '.1f')}, max {_fmt(t['seconds_max'], '.1f')}"),
+        ("stage seconds", "median " + (", ".join(f"{k} {v:.1f}"
+                                                 for k, v in t["stage_seconds"].items()) or "-")),
         ("skipped", f"{t['best_skipped']} curves' best designs passed over: "
                     + ", ".join(f"{k} {v}" for k, v in t["skipped"].items())),
         ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
@@ -330,6 +342,7 @@ def write_json(
     settings = {"candidates": options.candidates, "strategy": options.strategy,
                 "seed": options.seed, "time_budget": options.time_budget,
                 "refine": options.refine, "proposer": options.proposer,
+                "guidance": options.guidance,
                 "setup": setup, "path": options.path, "timed": options.timed,
                 "atlas": options.atlas and (options.atlas_path or "shipped"),
                 "rounds": search_width(options.time_budget, options.rounds,
@@ -348,10 +361,12 @@ def main(args) -> int:
                             time_budget=args.time_budget, refine=args.refine,
                             proposer=args.proposer, path=args.path, timed=args.timed,
                             **search_options(args))  # fmt: skip
+    if args.guidance is not None:
+        options = replace(options, guidance=args.guidance)
     if args.proposer == "random":
         proposer = random_proposer()
     else:
-        proposer = model_proposer(load_model(args.model), args.strategy, guidance=args.guidance)
+        proposer = model_proposer(load_model(args.model), args.strategy, guidance=options.guidance)
     with tempfile.TemporaryDirectory(prefix="linkd-curves-") as folder:
         files = curve_files(args.curves) if args.curves else []
         if args.dataset:

@@ -72,6 +72,8 @@ class DesignOptions:
     per_topology: int = 2  # of which at most this many share a topology
     attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
+    guidance: float | None = 1.0  # LinkD's guidance scale here (None: the model's own). Unguided:
+    # the search gains more from varied samples than from each one's fidelity, at half the cost
     proposer: str = "model"  # "model": LinkD; "random": the generator, blind to the curve
     refine_settings: RefineSettings = field(default_factory=RefineSettings)
     # Designer's constraints, in the curve's frame and units (contract §5).

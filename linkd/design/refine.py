@@ -7,7 +7,9 @@ resampled curves. Early on it also weighs an ordered term (the traced path, resa
 length, against the target at its best cyclic shift and direction), which pulls a path towards
 the parts of the target it misses instead of letting it settle on one lobe; every candidate is
 refined in two variants, with a lighter and a heavier ordered term, and only the best variants
-go on to the last, Chamfer-only iterations.
+go on to the last, Chamfer-only iterations. The early iterations trace the path at fewer crank
+angles (they only move it to the right region); their best iterates are traced finely again
+before the last ones.
 Soft penalties keep each candidate buildable: every dyad's squared transmission sine stays above
 a margin over the whole cycle (far from locking, transmission angles away from 0 and pi), links
 keep a minimum length, joints stay apart and near the curve. The best iterate within the hard
@@ -21,7 +23,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -45,6 +47,7 @@ class RefineSettings:
     # lighter one disturbs a good start less; the better variant is kept.
     ordered_weights: tuple[float, ...] = (0.1, 0.3)
     angles: int = 256  # crank angles the path is traced at
+    ordered_angles: int = 128  # and in the first iterations, which only need its rough shape
     first_step: float = 0.01  # length of a steepest-descent step (start, or after a reset)
     min_margin: float = 0.02  # hard limit: sin^2 of every transmission angle, whole cycle
     soft_margin: float = 0.04  # the penalty pushes sin^2 up towards this
@@ -133,7 +136,12 @@ def _refine(
     copies = len(s.ordered_weights)
     variants = batch.subset(np.repeat(np.arange(len(batch)), copies))
     plan = assembly_plan(variants.adjacency, variants.fixed, variants.valid)
-    objective = objective_type(variants, plan, target, s, constraints)
+    fine = objective_type(variants, plan, target, s, constraints)
+    coarse = fine
+    if s.ordered_angles != s.angles:
+        coarse = objective_type(variants, plan, target, replace(s, angles=s.ordered_angles),
+                                constraints)  # fmt: skip
+    objective = fine
     pinned = constraints is not None and constraints.motor_at is not None
     shape = variants.positions.shape
     best = variants.positions.copy()
@@ -155,7 +163,10 @@ def _refine(
     x = torch.tensor(variants.positions, dtype=torch.float32).reshape(len(variants), -1)
     every = torch.arange(len(variants))
     weights = torch.tensor(s.ordered_weights, dtype=torch.float32).repeat(len(batch))
-    evaluate(x, every, torch.zeros_like(weights))  # the start counts as an iterate too
+    zero = torch.zeros_like(weights)
+    evaluate(x, every, zero)  # the start counts as an iterate too
+    start, start_chamfer = best.copy(), best_chamfer.copy()
+    objective, best_chamfer[:] = coarse, np.inf
     # First every variant, with the ordered term; then only the best few, on Chamfer alone.
     first = min(s.ordered_iterations, s.iterations)
 
@@ -166,8 +177,11 @@ def _refine(
         return lambda done: progress(before + done, float(best_chamfer.min()))
 
     x, done = _phase(evaluate, x, every, first, weights, s, deadline, report(0))
+    # The first phase's best iterates, traced finely, replace the start where they are better.
+    found = torch.tensor(best, dtype=torch.float32).reshape(len(variants), -1)
+    objective, best[:], best_chamfer[:] = fine, start, start_chamfer
+    evaluate(found, every, zero)
     keep = torch.as_tensor(np.argsort(best_chamfer, kind="stable")[: s.keep])
-    zero = torch.zeros_like(weights)
     _, more = _phase(evaluate, x[keep], keep, s.iterations - first, zero, s, deadline,
                      report(done))  # fmt: skip
     # Each candidate's better variant.

@@ -88,8 +88,8 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         elif proposer is None:
             from linkd.sample import load_model
 
-            proposer = model_proposer(load_model(o.model), o.strategy)
-            report["model"] = o.model or "shipped"
+            proposer = model_proposer(load_model(o.model), o.strategy, guidance=o.guidance)
+            report["model"], report["guidance"] = o.model or "shipped", o.guidance
         graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
         note(f"{len(graphs)} designs")
     batches = [LinkageBatch.from_graphs(graphs)]
