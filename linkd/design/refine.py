@@ -39,7 +39,7 @@ from linkd.topology import Plan, assembly_plan
 class RefineSettings:
     """Lengths are in the target's normalised frame (centroid 0, RMS radius 1)."""
 
-    iterations: int = 200  # L-BFGS iterations in all
+    iterations: int = 160  # L-BFGS iterations in all
     ordered_iterations: int = 60  # the first ones refine every variant and weigh the ordered
     keep: int = 16  # term too; the rest refine only the best `keep` variants, on Chamfer alone
     # Each candidate is refined in one variant per weight of the ordered term (next to the

@@ -11,6 +11,7 @@ candidates throughout.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from functools import cache
 from typing import TYPE_CHECKING
 
@@ -143,6 +144,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
             report["budget_cut_refinement"] = iterations < settings.iterations
             note(f"{len(rows)} designs, {iterations} iterations, "
                  f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
+        # Copies of refined designs start near a good fit: one variant, the lighter ordered term.
+        nearby_settings = replace(settings, ordered_weights=settings.ordered_weights[:1])
+        refine_nearby = _refiner(goal, target, stroke, nearby_settings, inner, deadline)
         buildable = _buildable()
         for _ in range(rounds - 1):
             with stages.stage("round", "searching around the best designs") as note:
@@ -159,7 +163,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                 placed = np.concatenate([placed, found.chamfer])
                 rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
                                                      refine_count, refine_count), int)
-                done = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
+                done = refine_nearby(candidates, rows, _progress(stages, len(rows), settings))
                 note(f"{len(rows)} designs, {done} iterations, "
                      f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
         report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
