@@ -187,12 +187,20 @@ def describe_parts(
     return out
 
 
-def buildable(mech: Mechanism, options: ExportOptions | None = None) -> bool:
+def buildable(mech: Mechanism, options: ExportOptions | None = None, quick: bool = False) -> bool:
     """Whether `export_mechanism` would find sizes and layers for `mech`, without building or
     writing anything: the design search asks before it spends a round around a design that
-    could never be delivered."""
+    could never be delivered. quick: straight links at the first width only, what most
+    designs that build need (a refusal costs a fraction of the full search's; a design it
+    refuses may still build with narrower or bent links)."""
+    options = options or ExportOptions()
+    assembly = assemble(mech)
     try:
-        _layered(mech, assemble(mech), options or ExportOptions())
+        if quick:
+            sizes = resolve_sizes(mech, assembly.parts, options)
+            assign_layers(assembly, sweep(mech, sizes.link_width), sizes)
+        else:
+            _layered(mech, assembly, options)
     except ValueError:
         return False
     return True

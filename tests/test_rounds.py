@@ -3,6 +3,7 @@
 import numpy as np
 from test_export_narrow import KNOTTED, TANGLED
 
+from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design.propose import Candidates
 from linkd.design.rounds import around
@@ -13,17 +14,19 @@ from linkd.export import buildable
 
 def test_buildable_says_what_export_would_do():
     assert buildable(TANGLED)  # at a narrower width
+    assert not buildable(TANGLED, quick=True)  # which the quick check does not try
     assert not buildable(KNOTTED)  # refused at every width, straight or bent
+    assert buildable(classic.crank_rocker(), quick=True)
 
 
 def test_rounds_pass_over_a_better_design_that_cannot_be_built():
-    batch = LinkageBatch.from_mechanisms([KNOTTED, TANGLED])
+    batch = LinkageBatch.from_mechanisms([KNOTTED, classic.crank_rocker()])
     candidates = Candidates(batch, np.array([0.1, 0.2]))  # the refused one ranks first
     check = _buildable()
     nearby = around(candidates, count=2, copies=3, spread=0.1, seed=0, buildable=check)
     assert len(nearby) == 3
-    tangled = topology_key(batch, 1)
-    assert all(topology_key(nearby, row) == tangled for row in range(len(nearby)))
+    plain = topology_key(batch, 1)
+    assert all(topology_key(nearby, row) == plain for row in range(len(nearby)))
     # Without the check, the refused design's neighbourhood is searched first.
     unchecked = around(candidates, count=2, copies=3, spread=0.1, seed=0)
     assert topology_key(unchecked, 0) == topology_key(batch, 0)

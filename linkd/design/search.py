@@ -206,14 +206,15 @@ def _refiner(
 
 
 def _buildable() -> Callable[[LinkageBatch, int], bool]:
-    """Whether a candidate, as it stands, could be exported (layering is the same in any
-    similar frame, so the normalised one serves); remembered per design."""
+    """Whether a candidate, as it stands, could be exported with straight links at the usual
+    width (layering is the same in any similar frame, so the normalised one serves; the few
+    designs that need narrower or bent links are not searched around); remembered per design."""
     known: dict[bytes, bool] = {}
 
     def buildable(batch: LinkageBatch, row: int) -> bool:
         key = topology_key(batch, row) + batch.positions[row].tobytes()
         if key not in known:
-            known[key] = can_build(to_mechanism(batch, row, Similarity(), "mm"))
+            known[key] = can_build(to_mechanism(batch, row, Similarity(), "mm"), quick=True)
         return known[key]
 
     return buildable
