@@ -15,14 +15,18 @@ pin clear, and neither narrower nor bent links change that. Three constructions 
 
 The split parts, the bracket and its post are layered like any other parts and pins: the
 bracket is a static link from the pivot to the post, the post a pin of the ground at a point
-that never moves, and the layer search keeps every part clear of them.
+that never moves, and the layer search keeps every part clear of them. The clearances of every
+candidate (the whole crank, its arms for each shaft, a bracket in each direction) are swept
+once, and each choice is layered from its share of them.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from .layers import Arm, Bracket, Layout, find_conflicts, stack_layers
+from .layers import Arm, Bracket, Conflicts, Layout, find_conflicts, stack_layers
 from .options import Sizes
 from .parts import CRANK, Assembly, Part, Pin
 
@@ -31,77 +35,86 @@ POST_MARGIN = 2.0  # link widths between the post and the farthest point the mec
 
 
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with the crank's ground pivot held by a bracket, the crank whole or cut into arms
-    on a shaft at one of its pinned joints (whole first). ValueError when none layers."""
+    """Layers with the crank's ground pivot held by a bracket and the crank, when it is a plate,
+    cut into arms on a shaft at one of its pinned joints (the pivot first; a binary crank stays
+    whole). ValueError when none layers."""
     crank = next(h for h in assembly.hinges if h.name == CRANK)
-    pivot = crank.joint
-    post = _post(assembly, paths, sizes, pivot)
+    pivot, part = crank.joint, assembly.parts[crank.child]
     pinned = {pin.joint for pin in assembly.pins}
-    shafts = [None, *(j for j in assembly.parts[crank.child].joints if j in pinned)]
+    shafts = [pivot, *(j for j in part.joints if j != pivot and j in pinned)]
+    if part.kind != "plate":
+        shafts = []  # a binary crank is one arm already
+    union, extended, owners, posts = _candidates(assembly, paths, sizes, crank.child, pivot, shafts)
+    conflicts = find_conflicts(union, extended, sizes)
+    brackets = [q for q, owner in enumerate(owners) if owner < 0]
+    scores = [(sum(q in b for b in conflicts.blocked), int(conflicts.parts[q].sum()), k)
+              for k, q in enumerate(brackets)]  # fmt: skip
+    direction = min(scores)[2]
+    bracket, real = brackets[direction], len(assembly.parts)
     refusal = None
-    for shaft in shafts:
-        splits = {} if shaft is None else {crank.child: shaft}
-        virtual, extended, owners = _virtual(assembly, paths, splits, pivot, post)
+    for shaft in shafts or [None]:
+        keep = [q for q, owner in enumerate(owners)
+                if (owner >= 0 and q < real and (q != crank.child or shaft is None))
+                or (q >= real and owner == crank.child and union.parts[q].joints[0] == shaft)
+                or q == bracket]  # fmt: skip
+        chosen, share = _subset(union, conflicts, keep)
         try:
-            layout = stack_layers(virtual, find_conflicts(virtual, extended, sizes), sizes)
+            layout = stack_layers(chosen, share, sizes)
         except ValueError as exc:
             refusal = refusal or exc
             continue
-        return _real(assembly, layout, virtual, owners, post)
+        return _real(assembly, layout, chosen, [owners[q] for q in keep], posts[direction])
     raise refusal
 
 
-def _post(assembly: Assembly, paths: np.ndarray, sizes: Sizes, pivot: int) -> np.ndarray:
-    """Where the bracket's post stands: straight out from the pivot, past everything that moves,
-    in the direction whose arm the fewest pin paths (then parts) come near."""
+def _candidates(
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes, crank: int, pivot: int, shafts: list
+) -> tuple[Assembly, np.ndarray, list[int], np.ndarray]:
+    """Every candidate part as the layer search sees it: the real parts, the crank's arms for
+    each shaft (a link from the shaft to one more joint), and a bracket for each direction (a
+    static link from the pivot to its post, a point appended to the paths). The pins are those
+    of the real assembly with every candidate at their joint for members (the pivot's held by
+    the brackets, not by the ground), then each post, a pin of the ground. Returns it, the
+    extended paths, the real part of every candidate (-1 for a bracket) and the posts (D, 2)."""
+    parts, owners = list(assembly.parts), list(range(len(assembly.parts)))
+    for shaft in shafts:
+        for j in assembly.parts[crank].joints:
+            if j != shaft:
+                parts.append(Part(f"{assembly.parts[crank].name}_arm{j}", "link", (shaft, j)))
+                owners.append(crank)
     centre = paths[pivot, 0]
     radius = np.linalg.norm(paths - centre, axis=-1).max() + POST_MARGIN * sizes.link_width
     angles = np.arange(DIRECTIONS) * (2 * np.pi / DIRECTIONS)
     posts = centre + radius * np.stack([np.cos(angles), np.sin(angles)], -1)
-    n, first = len(paths), len(assembly.parts)
-    arms = [Part(f"bracket{k}", "link", (pivot, n + k)) for k in range(DIRECTIONS)]
-    still = np.repeat(posts[:, None], paths.shape[1], 1)
-    trial = Assembly([*assembly.parts, *arms], [], assembly.pins, [])
-    conflicts = find_conflicts(trial, np.concatenate([paths, still]), sizes)
-    scores = [
-        (sum(first + k in blocked for blocked in conflicts.blocked),
-         int(conflicts.parts[first + k].sum()), k)
-        for k in range(DIRECTIONS)
-    ]  # fmt: skip
-    return posts[min(scores)[2]]
-
-
-def _virtual(
-    assembly: Assembly, paths: np.ndarray, splits: dict[int, int], pivot: int, post: np.ndarray
-) -> tuple[Assembly, np.ndarray, list[int]]:
-    """The assembly the layer search sees: split parts as one link per arm, the bracket as a
-    static link from the pivot to the post (a point appended to the paths), the pivot's pin
-    held by the bracket instead of the ground, and the post as a pin of the ground. Returns it,
-    the extended paths and the real part of every virtual one (the bracket's is -1)."""
-    parts, owners = [assembly.parts[0]], [0]
-    for p, part in enumerate(assembly.parts[1:], start=1):
-        if p in splits:
-            shaft = splits[p]
-            arms = [Part(f"{part.name}_arm{j}", "link", (shaft, j)) for j in part.joints
-                    if j != shaft]  # fmt: skip
-            parts += arms
-            owners += [p] * len(arms)
-        else:
-            parts.append(part)
-            owners.append(p)
-    point = len(paths)
-    bracket = len(parts)
-    parts.append(Part("ground_bracket", "link", (pivot, point)))
-    owners.append(-1)
+    first = len(paths)
+    for k in range(DIRECTIONS):
+        parts.append(Part(f"ground_bracket{k}", "link", (pivot, first + k)))
+        owners.append(-1)
     pins = []
     for pin in assembly.pins:
         members = [q for q, part in enumerate(parts) if q and pin.joint in part.joints]
         if pin.joint != pivot and 0 in pin.members:
             members.insert(0, 0)
         pins.append(Pin(pin.name, pin.joint, members[0], tuple(members)))
-    pins.append(Pin("post", point, 0, (0, bracket)))
-    still = np.repeat(post[None, None], paths.shape[1], 1)
-    return Assembly(parts, [], pins, []), np.concatenate([paths, still]), owners
+    for k in range(DIRECTIONS):
+        pins.append(Pin(f"post{k}", first + k, 0, (0, len(parts) - DIRECTIONS + k)))
+    still = np.repeat(posts[:, None], paths.shape[1], 1)
+    return Assembly(parts, [], pins, []), np.concatenate([paths, still]), owners, posts
+
+
+def _subset(union: Assembly, conflicts: Conflicts, keep: list[int]) -> tuple[Assembly, Conflicts]:
+    """The assembly and conflicts of the candidates `keep` (the ground first): pins keep the
+    members and blocking parts that are kept, and lapse with fewer than two members."""
+    index = {q: k for k, q in enumerate(keep)}
+    pins, blocked = [], []
+    for pin, near in zip(union.pins, conflicts.blocked):
+        members = tuple(index[q] for q in pin.members if q in index)
+        if len(members) >= 2:
+            pins.append(replace(pin, hub=members[0], members=members))
+            blocked.append([index[q] for q in near if q in index])
+    sub = np.ix_(keep, keep)
+    return (Assembly([union.parts[q] for q in keep], [], pins, []),
+            Conflicts(conflicts.parts[sub], blocked, conflicts.distance[sub]))  # fmt: skip
 
 
 def _real(
