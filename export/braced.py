@@ -51,6 +51,9 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
               for k, q in enumerate(brackets)]  # fmt: skip
     direction = min(scores)[2]
     bracket, real = brackets[direction], len(assembly.parts)
+    # Without the crank and the bracket every choice below is relaxed to the same rest of the
+    # mechanism; where even that has no layering, none of them has (ValueError, at once).
+    stack_layers(*_subset(union, conflicts, [q for q in range(real) if q != crank.child]), sizes)
     refusal = None
     for shaft in shafts or [None]:
         keep = [q for q, owner in enumerate(owners)
