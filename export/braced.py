@@ -44,6 +44,8 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     shafts = [pivot, *(j for j in part.joints if j != pivot and j in pinned)]
     if part.kind != "plate":
         shafts = []  # a binary crank is one arm already
+    rest = _rest(assembly, find_conflicts(assembly, paths, sizes), crank.child, pivot)
+    stack_layers(*rest, sizes)  # or ValueError, at once: then no choice below layers either
     union, extended, owners, posts = _candidates(assembly, paths, sizes, crank.child, pivot, shafts)
     conflicts = find_conflicts(union, extended, sizes)
     brackets = [q for q, owner in enumerate(owners) if owner < 0]
@@ -51,9 +53,6 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
               for k, q in enumerate(brackets)]  # fmt: skip
     direction = min(scores)[2]
     bracket, real = brackets[direction], len(assembly.parts)
-    # Without the crank and the bracket every choice below is relaxed to the same rest of the
-    # mechanism; where even that has no layering, none of them has (ValueError, at once).
-    stack_layers(*_subset(union, conflicts, [q for q in range(real) if q != crank.child]), sizes)
     refusal = None
     for shaft in shafts or [None]:
         keep = [q for q, owner in enumerate(owners)
@@ -68,6 +67,17 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
             continue
         return _real(assembly, layout, chosen, [owners[q] for q in keep], posts[direction])
     raise refusal
+
+
+def _rest(
+    assembly: Assembly, conflicts: Conflicts, crank: int, pivot: int
+) -> tuple[Assembly, Conflicts]:
+    """The mechanism without its crank, the pivot's pin not held by the ground: what every
+    choice of arms and bracket leaves as it is, with fewer constraints than any of them."""
+    pins = [replace(pin, members=tuple(m for m in pin.members if m)) if pin.joint == pivot
+            else pin for pin in assembly.pins]  # fmt: skip
+    keep = [q for q in range(len(assembly.parts)) if q != crank]
+    return _subset(replace(assembly, pins=pins), conflicts, keep)
 
 
 def _candidates(
