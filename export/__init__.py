@@ -5,8 +5,9 @@
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
-`routing`), plates become STL meshes (`meshes`) and the bodies, hinges, pins, loop closures and
-crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
+`routing`; where bent ones cannot either, the crank splits into arms on a shaft held by a
+ground bracket, `braced`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
+loop closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
-from .layers import Layout, assign_layers, plates, sweep
+from .braced import braced_layers
+from .layers import Layout, assign_layers, plate_points, plates, post_spans, sweep
 from .mjcf import TIMESTEP, build_mjcf, build_scene, qpos_at, retimed, servo_gains
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
@@ -93,22 +95,24 @@ def _layered(mech: Mechanism, assembly: Assembly, options: ExportOptions) -> tup
     """Sizes and layers. Where the default link width leaves no flat layering (a part passes
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
-    no width does, binary links bend around the pins in their way (`routing`), at each width.
-    Widths the user gave are kept (bent links are still tried; ValueError when nothing works)."""
+    no width does, binary links bend around the pins in their way (`routing`), at each width,
+    and then the crank splits into arms on a shaft held by a ground bracket (`braced`). Widths
+    the user gave are kept (the other constructions are still tried; ValueError when nothing
+    works)."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None:
         narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
     first = None
-    for layering in (assign_layers, bent_layers):
+    for layering in (assign_layers, bent_layers, braced_layers):
         for size in tries:
             try:
                 return size, layering(assembly, sweep(mech, size.link_width), size)
             except ValueError as exc:
                 first = first or exc
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
-    raise ValueError(f"{first} (straight and bent links{widths} tried)")
+    raise ValueError(f"{first} (straight, bent and split links{widths} tried)")
 
 
 def _write_meshes(
@@ -125,7 +129,7 @@ def _write_meshes(
     (out_dir / MESHES).mkdir(exist_ok=True)
     model, whole = {}, {}
     for plate in plates(assembly, layout):
-        points = (mech.positions[list(plate.joints)] - origins[plate.part]) * unit
+        points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
         if not plate.bends:
             write_stl(out_dir / whole[plate.name], *plate_mesh(points, *size), plate.name)
@@ -165,12 +169,17 @@ def set_timestep(out_dir: Path, timestep: float) -> None:
 def describe_parts(
     assembly: Assembly, layout: Layout, sizes: Sizes, wholes: dict, meshes: dict
 ) -> list[dict]:
-    """JSON descriptions of the plates and pins (sizes in the mechanism's units); a bent link
-    also has its waypoints (`bends`, assembly pose) and the STL of each bar (`pieces`)."""
+    """JSON descriptions of the plates, pins and posts (sizes in the mechanism's units); a bent
+    link also has its waypoints (`bends`, assembly pose) and the STL of each bar (`pieces`), an
+    arm of a split part its part (`arm_of`), a ground plate holding posts their axes (`posts`)."""
     out = []
     for plate in plates(assembly, layout):
         entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
                  "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
+        if plate.part in layout.arms:
+            entry["arm_of"] = assembly.parts[plate.part].name
+        if plate.posts:
+            entry["posts"] = [list(point) for point in plate.posts]
         if plate.bends:
             entry["bends"] = [list(point) for point in plate.bends]
         if plate.name in wholes:
@@ -178,11 +187,21 @@ def describe_parts(
         if plate.bends and wholes:
             entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
         out.append(entry)
+    shafts = {arms[0].joints[0]: p for p, arms in layout.arms.items()}
     for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
-        out.append({
+        entry = {
             "name": pin.name, "kind": "pin", "joints": [pin.joint], "layers": [lo, hi],
             "joins": [assembly.parts[m].name for m in pin.members],
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
+        }  # fmt: skip
+        if pin.joint in shafts:
+            entry["fixed_in"] = assembly.parts[shafts[pin.joint]].name
+        out.append(entry)
+    for k, ((lo, hi), bracket) in enumerate(zip(post_spans(layout), layout.brackets)):
+        out.append({
+            "name": f"{assembly.parts[0].name}_post{k}", "kind": "post", "at": list(bracket.post),
+            "layers": [lo, hi], "diameter": sizes.hole_diameter,
+            "length": (hi - lo) * sizes.pitch + sizes.thickness,
         })  # fmt: skip
     return out
 

@@ -38,6 +38,25 @@ MAX_COVER_TRIES = 4  # choices of ground pins hanging from a cover plate, per la
 
 
 @dataclass(frozen=True)
+class Arm:
+    """One plate of a part split into arms on a shaft: the shaft joint and one more joint."""
+
+    joints: tuple[int, int]  # (shaft, other joint)
+    layer: int
+
+
+@dataclass(frozen=True)
+class Bracket:
+    """A ground plate on a layer inside the stack, holding the pin of a ground joint, with an
+    arm out to a post that stands in the base plate (or hangs from the cover)."""
+
+    joint: int
+    post: tuple[float, float]  # the post's axis, mechanism units (assembly frame)
+    layer: int
+    top: bool  # the post hangs from the cover rather than standing in the base
+
+
+@dataclass(frozen=True)
 class Layout:
     layers: np.ndarray  # (P,) layer of every part; the ground's (base plate) is 0
     pin_spans: list[tuple[int, int]]  # (lowest, highest) layer of each pin, plates included
@@ -46,6 +65,8 @@ class Layout:
     min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
     minimal: bool = True  # the search proved that fewer layers cannot work
     bends: dict[int, np.ndarray] = field(default_factory=dict)  # bent links' waypoints (routing)
+    arms: dict[int, tuple[Arm, ...]] = field(default_factory=dict)  # split parts (`braced`)
+    brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
 
 
 @dataclass(frozen=True)
@@ -57,19 +78,41 @@ class Plate:
     joints: tuple[int, ...]  # joints it has holes for
     layer: int
     bends: tuple[tuple[float, float], ...] = ()  # waypoints of a bent link, between its joints
+    posts: tuple[tuple[float, float], ...] = ()  # ground posts it holds (outline and holes)
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
-    """Every plate of the layout: the ground's base (and cover), then one per moving part."""
+    """Every plate of the layout: the ground's base (and cover) and brackets, then one per
+    moving part, or one per arm of a split part."""
     ground = assembly.parts[0]
-    base = tuple(j for j in ground.joints if j not in layout.top_joints)
-    out = [Plate(ground.name, 0, base, 0)] if base else []
-    if layout.top_joints:
-        out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1))
+    held = {b.joint for b in layout.brackets}
+    base = tuple(j for j in ground.joints if j not in layout.top_joints and j not in held)
+    low = tuple(b.post for b in layout.brackets if not b.top)
+    high = tuple(b.post for b in layout.brackets if b.top)
+    out = [Plate(ground.name, 0, base, 0, posts=low)] if base or low else []
+    if layout.top_joints or high:
+        out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1,
+                         posts=high))  # fmt: skip
+    for k, b in enumerate(layout.brackets):
+        out.append(Plate(f"{ground.name}_bracket{k}", 0, (b.joint,), b.layer, posts=(b.post,)))
     for p, part in enumerate(assembly.parts[1:], start=1):
-        bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
-        out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
+        for k, arm in enumerate(layout.arms.get(p, ())):
+            out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
+        if p not in layout.arms:
+            bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
+            out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
     return out
+
+
+def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:
+    """(k, 2) points a plate is made round, each with a hole: its joints, then its posts."""
+    return np.concatenate([mech.positions[list(plate.joints)], np.reshape(plate.posts, (-1, 2))])
+
+
+def post_spans(layout: Layout) -> list[tuple[int, int]]:
+    """(lowest, highest) layer of each bracket's post: from the base, or up to the cover."""
+    top = layout.count - 1
+    return [(b.layer, top) if b.top else (0, b.layer) for b in layout.brackets]
 
 
 @dataclass(frozen=True)

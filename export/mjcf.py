@@ -29,7 +29,7 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import Layout, Plate, convex_hull, plates
+from .layers import Layout, Plate, convex_hull, plate_points, plates, post_spans
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
@@ -91,7 +91,11 @@ class _Builder:
         for plate in every:
             if plate.part == 0:
                 self.plate(plate, meshes)
-        moving = {plate.part: plate for plate in every if plate.part}
+        self.posts()
+        moving: dict[int, list[Plate]] = {}
+        for plate in every:
+            if plate.part:
+                moving.setdefault(plate.part, []).append(plate)
         for h in self.assembly.hinges:
             x, y = (self.origin[h.child] - self.origin[h.parent]) * self.unit
             name = self.assembly.parts[h.child].name
@@ -100,7 +104,8 @@ class _Builder:
             if h.name == CRANK and self.armature > 0:
                 joint.set("armature", _fmt(self.armature))
             self.bodies[h.child] = body
-            self.plate(moving[h.child], meshes)
+            for plate in moving[h.child]:
+                self.plate(plate, meshes)
 
     def plate(self, plate: Plate, meshes: dict[str, str]) -> None:
         """A plate on its layer: its mesh, or boxes along its hull and discs at its joints. A
@@ -108,7 +113,7 @@ class _Builder:
         body = self.bodies[plate.part]
         z = plate.layer * self.pitch
         colour = _fmt(*LAYER_COLOURS[plate.layer % len(LAYER_COLOURS)], 1)
-        points = np.array([self.local(plate.part, j) for j in plate.joints])
+        points = (plate_points(self.mech, plate) - self.origin[plate.part]) * self.unit
         bends = (np.reshape(plate.bends, (-1, 2)) - self.origin[plate.part]) * self.unit
         chain = np.concatenate([points[:1], bends, points[1:]]) if plate.bends else points
         pieces = [f"{plate.name}_bar{k}" for k in range(len(chain) - 1)] if plate.bends else []
@@ -133,11 +138,23 @@ class _Builder:
                           size=_fmt(length / 2, self.width / 2, self.thickness / 2),
                           pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
         discs = [*zip((f"boss{j}" for j in plate.joints), points),
+                 *zip((f"post{k}" for k in range(len(plate.posts))), points[len(plate.joints):]),
                  *zip((f"bend{k}" for k in range(len(bends))), bends)]  # fmt: skip
         for name, (x, y) in discs:
             ET.SubElement(body, "geom", name=f"{plate.name}_{name}", type="cylinder",
                           size=_fmt(self.width / 2, self.thickness / 2), pos=_fmt(x, y, zc),
                           rgba=colour)  # fmt: skip
+
+    def posts(self) -> None:
+        """The brackets' posts: rods of the pin diameter on the ground, from the base plate up
+        to the bracket or from the bracket up to the cover."""
+        name = self.assembly.parts[0].name
+        for k, (bracket, (lo, hi)) in enumerate(zip(self.layout.brackets, post_spans(self.layout))):
+            bottom, top = lo * self.pitch, hi * self.pitch + self.thickness
+            x, y = np.asarray(bracket.post) * self.unit
+            ET.SubElement(self.bodies[0], "geom", name=f"{name}_post{k}", type="cylinder",
+                          size=_fmt(self.hole / 2, (top - bottom) / 2),
+                          pos=_fmt(x, y, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip
 
     def pin(self, k: int) -> None:
         """A pin body on its hub, spanning the layers of the parts it joins."""

@@ -6,7 +6,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 import trimesh
-from test_export_narrow import KNOTTED, TANGLED
+from test_export_narrow import SNARLED, TANGLED
 
 from linkd.export import ExportOptions, export_mechanism
 from linkd.export.layers import assign_layers, sweep
@@ -87,6 +87,7 @@ def test_a_straightened_bent_link_is_caught(bent, tmp_path):
 
 
 def test_what_bending_cannot_save_is_refused_in_one_line(tmp_path):
-    with pytest.raises(ValueError, match=r"straight and bent links, down to 0\.25") as refusal:
-        export_mechanism(KNOTTED, tmp_path, {"mjcf"})
+    message = r"straight, bent and split links, down to 0\.25"
+    with pytest.raises(ValueError, match=message) as refusal:
+        export_mechanism(SNARLED, tmp_path, {"mjcf"})
     assert "\n" not in str(refusal.value)

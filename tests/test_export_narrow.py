@@ -24,13 +24,24 @@ TANGLED = Mechanism(
 )  # fmt: skip
 
 # Generated (seed 2026, no. 80): a ternary crank whose two couplers each sweep over the other's
-# pin and over the pivot: no flat layering at any width linkd tries.
+# pin and over the pivot: no flat layering at any width linkd tries, straight or bent (it is
+# built with the crank split on a ground bracket, test_export_braced).
 KNOTTED = Mechanism(
     [(48.349, 73.281), (86.18, 96.902), (35.808, 91.922), (-62.988, 87.08), (-58.152, 9.109),
      (80.968, -67.956), (44.982, -77.361), (67.468, -0.151)],
     [1, 0, 0, 1, 0, 0, 0, 0],
     [(0, 1), (0, 2), (1, 2), (1, 6), (2, 4), (2, 7), (3, 4), (3, 5), (3, 6), (4, 5), (4, 7)],
     (0, 1), 7,
+)  # fmt: skip
+
+# Generated (seed 2026, no. 63): a crank plate with four pins; no flat layering at any width,
+# straight, bent or split on a bracket.
+SNARLED = Mechanism(
+    [(87.552, 99.887), (88.600, 52.471), (68.072, 76.128), (22.447, -18.934), (98.645, 5.661),
+     (7.390, -1.423), (32.129, -97.137), (5.600, -60.209), (62.346, 60.864)],
+    [1, 0, 1, 0, 0, 1, 0, 0, 0],
+    [(0, 1), (0, 4), (1, 3), (1, 6), (1, 7), (1, 8), (2, 3), (3, 4), (4, 8), (5, 6), (6, 7)],
+    (0, 1), 8,
 )  # fmt: skip
 
 
@@ -49,19 +60,19 @@ def test_refused_at_the_default_width_is_built_with_narrower_links_and_verified(
 def test_a_width_the_user_gives_is_kept(tmp_path):
     from linkd.export import ExportOptions
 
-    width = resolve_sizes(KNOTTED, assemble(KNOTTED).parts, None).link_width
+    width = resolve_sizes(SNARLED, assemble(SNARLED).parts, None).link_width
     with pytest.raises(ValueError, match="flat layers") as refusal:
-        export_mechanism(KNOTTED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
+        export_mechanism(SNARLED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
     assert "usual width" not in str(refusal.value)  # no narrower width was tried
 
 
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
-        export_mechanism(KNOTTED, tmp_path, {"mjcf"})
+        export_mechanism(SNARLED, tmp_path, {"mjcf"})
     skipped = Counter()
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-    target = KNOTTED.positions[KNOTTED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
-    assert deliver(KNOTTED, target, tmp_path, {"mjcf"}, {}, skipped=skipped) is None
+    target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
+    assert deliver(SNARLED, target, tmp_path, {"mjcf"}, {}, skipped=skipped) is None
     assert skipped == {"unbuildable": 1}
     assert not list(tmp_path.iterdir())
 

@@ -1,7 +1,7 @@
 """Later rounds search around designs the export can build (linkd.design.rounds)."""
 
 import numpy as np
-from test_export_narrow import KNOTTED, TANGLED
+from test_export_narrow import KNOTTED, SNARLED, TANGLED
 
 from linkd import classic
 from linkd.batch import LinkageBatch
@@ -15,12 +15,14 @@ from linkd.export import buildable
 def test_buildable_says_what_export_would_do():
     assert buildable(TANGLED)  # at a narrower width
     assert not buildable(TANGLED, quick=True)  # which the quick check does not try
-    assert not buildable(KNOTTED)  # refused at every width, straight or bent
+    assert not buildable(SNARLED)  # refused at every width, straight, bent or split
+    assert buildable(KNOTTED)  # with its crank split on a ground bracket
+    assert not buildable(KNOTTED, quick=True)
     assert buildable(classic.crank_rocker(), quick=True)
 
 
 def test_rounds_pass_over_a_better_design_that_cannot_be_built():
-    batch = LinkageBatch.from_mechanisms([KNOTTED, classic.crank_rocker()])
+    batch = LinkageBatch.from_mechanisms([SNARLED, classic.crank_rocker()])
     candidates = Candidates(batch, np.array([0.1, 0.2]))  # the refused one ranks first
     check = _buildable()
     nearby = around(candidates, count=2, copies=3, spread=0.1, seed=0, buildable=check)
@@ -33,7 +35,7 @@ def test_rounds_pass_over_a_better_design_that_cannot_be_built():
 
 
 def test_no_round_when_nothing_can_be_built():
-    candidates = Candidates(LinkageBatch.from_mechanisms([KNOTTED]), np.array([0.1]))
+    candidates = Candidates(LinkageBatch.from_mechanisms([SNARLED]), np.array([0.1]))
     assert len(around(candidates, 4, 3, 0.1, 0, _buildable())) == 0
 
 
