@@ -105,7 +105,8 @@ def _layered(mech: Mechanism, assembly: Assembly, options: ExportOptions) -> tup
         narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
     first = None
-    for layering in (assign_layers, bent_layers, braced_layers):
+    layerings = (assign_layers, bent_layers, braced_layers)
+    for layering in layerings if options.brackets else layerings[:2]:
         for size in tries:
             try:
                 return size, layering(assembly, sweep(mech, size.link_width), size)

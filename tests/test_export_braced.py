@@ -7,7 +7,7 @@ import pytest
 import trimesh
 from test_export_narrow import KNOTTED
 
-from linkd.export import export_mechanism
+from linkd.export import ExportOptions, buildable, export_mechanism
 from linkd.export.layers import assign_layers, sweep
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
@@ -92,3 +92,11 @@ def test_a_planted_collision_in_the_split_crank_or_its_bracket_is_caught(braced,
     assert "collisions" in report.failed
     detail = next(c.detail for c in report.checks if c.name == "collisions")
     assert name in detail
+
+
+def test_without_brackets_the_same_mechanism_is_refused(tmp_path):
+    """What a design run past its time budget asks for: the slow construction left out."""
+    assert buildable(KNOTTED)
+    assert not buildable(KNOTTED, ExportOptions(brackets=False))
+    with pytest.raises(ValueError, match="flat layers"):
+        export_mechanism(KNOTTED, tmp_path, {"mjcf"}, ExportOptions(brackets=False))

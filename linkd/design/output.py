@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from linkd.export import ExportResult
+from linkd.export import ExportOptions, ExportResult
 from linkd.mechanism import Mechanism
 from linkd.outdir import write_atomic
 from linkd.topology import Status
@@ -50,11 +50,13 @@ def deliver(
     source: dict,
     timed: bool = False,
     skipped: Counter | None = None,
+    brackets: bool = True,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
     fails any step, counted in `skipped` by the step ("invalid", "unbuildable": the export
     refused it, "failed_verification"). `target` is the user's curve, in the mechanism's frame
-    (`timed`: its rows equally spaced in time)."""
+    (`timed`: its rows equally spaced in time; `brackets`: whether the export may split the
+    crank on a ground bracket)."""
     skipped = Counter() if skipped is None else skipped
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
@@ -63,7 +65,8 @@ def deliver(
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
     try:
-        export, report = export_verified(mech, folder, set(formats) | {"mjcf"})
+        export, report = export_verified(mech, folder, set(formats) | {"mjcf"},
+                                         ExportOptions(brackets=brackets))
     except ValueError:
         _empty(folder)
         skipped["unbuildable"] += 1

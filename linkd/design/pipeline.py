@@ -138,8 +138,9 @@ def design(
             candidates = search(goal, inner, o, proposer, stages, deadline, report_search)
             skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))  # better designs passed over
             report_search["skipped"] = skipped
+            ends = start + o.time_budget
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
-                                                     source, skipped)  # fmt: skip
+                                                     source, skipped, ends)  # fmt: skip
             report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
@@ -178,11 +179,13 @@ def _deliver(
     stage: Path,
     source: dict,
     skipped: Counter,
+    ends: float,
 ) -> tuple[Delivered, list[dict], list]:
     """Verify designs from the best until one passes, counting in `skipped` why each better one
-    was passed over; then the alternatives, if asked for. With constraints, only designs that
-    meet them all, measured exactly in the user's units, are exported; the measurements of the
-    one delivered come back too."""
+    was passed over; then the alternatives, if asked for. Past the time budget's end (`ends`,
+    a `time.monotonic()` value) the export no longer tries the slow bracket construction. With
+    constraints, only designs that meet them all, measured exactly in the user's units, are
+    exported; the measurements of the one delivered come back too."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     c = o.constraints
@@ -206,7 +209,7 @@ def _deliver(
             else:
                 origin = SOURCES[candidates.source[row]]
                 found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
-                                o.timed, skipped)  # fmt: skip
+                                o.timed, skipped, time.monotonic() < ends)  # fmt: skip
                 if found:
                     break
                 failed[key] = failed.get(key, 0) + 1
