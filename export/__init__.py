@@ -91,22 +91,25 @@ def export_mechanism(
                         sizes.to_dict(), layout.min_gap, layout.minimal)  # fmt: skip
 
 
-def _layered(mech: Mechanism, assembly: Assembly, options: ExportOptions) -> tuple[Sizes, Layout]:
+def _layered(
+    mech: Mechanism, assembly: Assembly, options: ExportOptions, quick: bool = False
+) -> tuple[Sizes, Layout]:
     """Sizes and layers. Where the default link width leaves no flat layering (a part passes
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    and then the crank splits into arms on a shaft held by a ground bracket (`braced`). Widths
-    the user gave are kept (the other constructions are still tried; ValueError when nothing
-    works)."""
+    and then the crank splits into arms on a shaft held by a ground bracket (`braced`, unless
+    `options.brackets` is off). Widths the user gave are kept (the other constructions are still
+    tried; ValueError when nothing works). quick: straight links at the first width only."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
-    if options.link_width is None:
+    if options.link_width is None and not quick:
         narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
-    first = None
     layerings = (assign_layers, bent_layers, braced_layers)
-    for layering in layerings if options.brackets else layerings[:2]:
+    layerings = layerings[:1] if quick else layerings if options.brackets else layerings[:2]
+    first = None
+    for layering in layerings:
         for size in tries:
             try:
                 return size, layering(assembly, sweep(mech, size.link_width), size)
@@ -213,14 +216,8 @@ def buildable(mech: Mechanism, options: ExportOptions | None = None, quick: bool
     could never be delivered. quick: straight links at the first width only, what most
     designs that build need (a refusal costs a fraction of the full search's; a design it
     refuses may still build with narrower or bent links)."""
-    options = options or ExportOptions()
-    assembly = assemble(mech)
     try:
-        if quick:
-            sizes = resolve_sizes(mech, assembly.parts, options)
-            assign_layers(assembly, sweep(mech, sizes.link_width), sizes)
-        else:
-            _layered(mech, assembly, options)
+        _layered(mech, assemble(mech), options or ExportOptions(), quick)
     except ValueError:
         return False
     return True

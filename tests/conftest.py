@@ -7,7 +7,7 @@ import pytest
 import torch
 from hypothesis import settings
 
-from linkd.export import buildable
+from linkd.export import ExportOptions, buildable
 from linkd.generator import GeneratorSettings, generate
 from linkd.graph import from_graph
 
@@ -27,11 +27,6 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-def _unbraced(*layering) -> None:
-    """The export's bracket construction, turned off: a refusal."""
-    raise ValueError("cannot be built from flat layers")
-
-
 @pytest.fixture(scope="module")
 def pool():
     """Small generated designs; the first one can be built in flat layers, straight or bent (not
@@ -39,8 +34,7 @@ def pool():
     first generated design needs a bracket and holds a smaller linkage tracing its very path,
     which the design tests would deliver instead of the sample itself."""
     graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
-    with pytest.MonkeyPatch.context() as patch:
-        patch.setattr("linkd.export.braced_layers", _unbraced)
-        first = next((k for k, g in enumerate(graphs) if buildable(from_graph(g))), None)
+    flat = ExportOptions(brackets=False)
+    first = next((k for k, g in enumerate(graphs) if buildable(from_graph(g), flat)), None)
     assert first is not None, "no exportable design in the pool"
     return np.concatenate([graphs[first:], graphs[:first]])
