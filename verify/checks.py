@@ -45,7 +45,7 @@ from .pose import CRANK, Connects, loop_closure
 N_ANGLES = 200  # crank angles 2*pi*k/N of the kinematic checks
 RANK_RTOL = 1e-9  # singular values below this fraction of the largest count as zero
 PATH_RTOL = 1e-6  # kinematic path error, of the path's RMS radius
-RAMP_S, SETTLE_S = 2.0, 0.5  # control ramp 0 -> 2*pi, then hold
+RAMP_S, SETTLE_S = 1.0, 0.25  # s: control ramp 0 -> 2*pi (one revolution a second), then hold
 CRANK_TOL = 1e-2  # rad: the crank's final angle from 2*pi
 LOOP_RTOL = 1e-6  # dynamic loop violation, of the shortest link
 DYNAMIC_PATH_RTOL = 1e-5  # dynamic path error, of the path's RMS radius
