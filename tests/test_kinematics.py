@@ -87,6 +87,22 @@ def test_gradient_matches_finite_differences():
     assert torch.autograd.gradcheck(loss, (pos,), eps=1e-6, atol=1e-5)
 
 
+def test_gradient_of_a_padded_batch_matches_finite_differences():
+    # Several dyads deep, padded plans (unused steps), paths, transmissions and margins at once:
+    # the reverse walk through the steps (`linkd.dyad_grad`) against finite differences.
+    mechs = [classic.jansen_leg(), classic.crank_rocker(), classic.stephenson_six_bar()]
+    batch = LinkageBatch.from_mechanisms(mechs)
+    plan = assembly_plan(batch.adjacency, batch.fixed, batch.valid)
+    weights = torch.linspace(-1, 1, batch.positions.size).reshape(batch.positions.shape)
+
+    def loss(p):
+        motion = trace(p, plan, 12, full=True)
+        return (motion.paths.sum(2) * weights).sum() + motion.sin2.sum() + motion.margin.sum()
+
+    pos = torch.tensor(batch.positions, requires_grad=True)
+    assert torch.autograd.gradcheck(loss, (pos,), eps=1e-6, atol=1e-5)
+
+
 def test_float32_and_cuda_free_path_runs():
     batch = LinkageBatch.from_mechanisms([classic.jansen_leg()])
     plan = assembly_plan(batch.adjacency, batch.fixed, batch.valid)
