@@ -71,27 +71,28 @@ def find_order(state: PinState, conflict: np.ndarray) -> tuple[list[int] | None,
     set of parts placed, so a set that led nowhere is never expanded again.
     """
     n = len(state.layer)
+    clashes = [sum(1 << q for q in np.flatnonzero(row)) for row in conflict]  # as bit sets
     dead: set[int] = set()
     order: list[int] = []
 
-    def extend(placed: int, here: list[int]) -> bool:
+    def extend(placed: int, here: int) -> bool:
         if state.left == 0:
             return True
         if placed in dead or len(dead) > SEARCH_BUDGET:
             return False
         ready = [p for p in range(n) if state.free(p)]
-        fits = {p: not conflict[p, here].any() for p in ready}
+        fits = {p: not clashes[p] & here for p in ready}
         for p in sorted(ready, key=lambda p: (not fits[p], -state.closes(p))):
             state.place(p, len(order) + 1)
             order.append(p)
-            if extend(placed | 1 << p, [*here, p] if fits[p] else [p]):
+            if extend(placed | 1 << p, here | 1 << p if fits[p] else 1 << p):
                 return True
             order.pop()
             state.place(p, 0, -1)
         dead.add(placed)
         return False
 
-    found = extend(0, [])
+    found = extend(0, 0)
     return (order if found else None), found or len(dead) <= SEARCH_BUDGET
 
 
