@@ -68,7 +68,7 @@ class DesignOptions:
     every_joint: bool = True  # also offer each sample's sub-mechanisms (any joint as end effector)
     placed: int = 1024  # candidates aligned exactly: the sub-mechanisms most like the target
     refine_count: int | None = None  # candidates refined together, in each round (each in two
-    # variants; None: from the budget, 32 for the default)
+    # variants; None: from the budget, 48 for the default)
     per_topology: int = 2  # of which at most this many share a topology
     attempts: int = 24  # designs tried (validated, exported, verified) before giving up
     model: str | None = None  # checkpoint; None: the shipped one
