@@ -106,8 +106,9 @@ def _layered(
     if options.link_width is None and not quick:
         narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
-    layerings = (assign_layers, bent_layers, braced_layers)
-    layerings = layerings[:1] if quick else layerings if options.brackets else layerings[:2]
+    layerings = [assign_layers] if quick else [assign_layers, bent_layers]
+    if options.brackets and not quick:
+        layerings.append(braced_layers)
     first = None
     for layering in layerings:
         for size in tries:

@@ -11,7 +11,7 @@ time constant of two time steps (`solref`) with impedance near 1 (`solimp` 0.999
 0.5 ms, a 2 s motor revolution of the Jansen leg keeps its loops closed to 8e-8 of its shortest
 link (the contract asks 1e-6; at 1 ms it is 3e-7, at 2 ms 1.3e-6), but random mechanisms close
 to a toggle pose reached 1.2e-6 (2 of 62 in `linkd bench export`), so the step is 0.25 ms, which
-brings those to 3e-7; implicitfast needs 50 us and runs five times slower. Verification now
+brings those to 3e-7; implicitfast needs 50 us and runs five times slower. Verification
 turns the crank in 1 s (twice as fast, so the loop error grows fourfold): 34 random mechanisms
 stay within 5e-7 of their shortest link (median 3e-8), in half the simulated steps. A model
 that still misses the tolerances at that step is written again with a finer one (`retimed`; the

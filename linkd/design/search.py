@@ -169,7 +169,8 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                 placed = np.concatenate([placed, found.chamfer])
                 rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
                                                      refine_count, refine_count), int)
-                done = refine_nearby(candidates, rows, _progress(stages, len(rows), settings))
+                progress = _progress(stages, len(rows), nearby_settings)
+                done = refine_nearby(candidates, rows, progress)
                 note(f"{len(rows)} designs, {done} iterations, "
                      f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
         report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
