@@ -214,3 +214,24 @@ def test_sub_mechanism_examples_trace_their_curves(data):
     assert np.all(distance < 1e-3)
     kept = sub_mechanism_examples(graphs, curves, g, share=0.0)
     assert torch.equal(kept[0], graphs) and torch.equal(kept[1], curves)
+
+
+def test_the_command_line_sets_the_position_weight_of_the_loss(tmp_path):
+    from linkd.cli import main
+    from linkd.dataset import build
+
+    build(tmp_path / "data", 200, seed=0, shard_size=200)
+    out = tmp_path / "run"
+    args = ["train", "--preset", "tiny", "--data", str(tmp_path / "data"), "--out", str(out),
+            "--steps", "2", "--threads", "1"]  # fmt: skip
+    assert main([*args, "--position-weight", "4"]) == 0
+    model = load_checkpoint(out / "linkd.pt")[0]
+    assert model.config.position_weight == 4.0
+    sample = generate(8, 1)
+    torch.manual_seed(0)
+    curves = conditioning(torch.as_tensor(sample.curves))
+    total, parts = model(torch.as_tensor(sample.graphs), curves, 1)
+    assert total.item() == pytest.approx(
+        sum(v.item() for k, v in parts.items() if k != "position") + 4 * parts["position"].item(),
+        rel=1e-5,
+    )

@@ -27,6 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="nodes also attend to the curve's patch tokens (default: the preset's)",
     )
+    p.add_argument(
+        "--position-weight",
+        type=float,
+        help="weight of the joint-position loss against validity, type and links (default: 2)",
+    )
     p.add_argument("--init", help="start from this checkpoint's weights (e.g. a cpu run's)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", help="cpu or cuda (default: the preset's)")
@@ -60,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
     preset = CONFIGS[args.preset]
     if args.cross_attention is not None:
         preset = replace(preset, model=replace(preset.model, cross_attention=args.cross_attention))
+    if args.position_weight is not None:
+        preset = replace(preset, model=replace(preset.model, position_weight=args.position_weight))
     config = replace(
         preset,
         data=args.data,

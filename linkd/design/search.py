@@ -10,6 +10,7 @@ candidates throughout.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import replace
 from functools import cache
@@ -50,7 +51,7 @@ if TYPE_CHECKING:
     from .pipeline import DesignOptions
 
 N_POINTS = 200  # points of the normalised target the model and the refinement see
-ROUND_ITERATIONS = 100  # L-BFGS iterations of a later round's copies, which start near a fit
+ROUND_ITERATIONS = 100  # L-BFGS iterations of a later round's copies in the default budget
 ROUND_ORDERED_ITERATIONS = 40  # of which the first, every copy, at the coarse angles
 
 
@@ -65,12 +66,13 @@ def search_width(
     refine_count: int | None = None,
 ) -> tuple[int, int, int]:
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
-    not given: two rounds, 1024 paths and 48 designs for the default 30 s; one round, 1024 paths
-    and 16 designs more for every further 30 s (wider rounds reach basins that longer ones
-    around the same few designs do not). The budget's deadline still stops refinement early on
-    a slow or busy machine."""
+    not given: two rounds, 1024 paths and 48 designs for the default 30 s; for every further
+    30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
+    same few designs do not) and up to four rounds more, as many as the budget's deadline
+    leaves time for. The deadline also stops refinement early on a slow or busy machine."""
     steps = max(1, round(time_budget / 30))
-    return rounds or 1 + steps, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
+    more = 4 * (steps - 1)
+    return rounds or 2 + more, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
 
 
 def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
@@ -147,14 +149,18 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
             note(f"{len(rows)} designs, {iterations} iterations, "
                  f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
         # Copies of refined designs start near a good fit: one variant, the lighter ordered term,
-        # fewer iterations.
-        nearby_settings = replace(settings, ordered_weights=settings.ordered_weights[:1],
-                                  iterations=min(settings.iterations, ROUND_ITERATIONS),
-                                  ordered_iterations=min(settings.ordered_iterations,
-                                                         ROUND_ORDERED_ITERATIONS))  # fmt: skip
+        # and within the default budget fewer iterations (a longer one runs them all).
+        nearby_settings = replace(settings, ordered_weights=settings.ordered_weights[:1])
+        if round(o.time_budget / 30) <= 1:
+            nearby_settings = replace(nearby_settings,
+                                      iterations=min(settings.iterations, ROUND_ITERATIONS),
+                                      ordered_iterations=min(settings.ordered_iterations,
+                                                             ROUND_ORDERED_ITERATIONS))  # fmt: skip
         refine_nearby = _refiner(goal, target, stroke, nearby_settings, inner, deadline)
         buildable = _buildable()
         for _ in range(rounds - 1):
+            if time.monotonic() > deadline:
+                break
             with stages.stage("round", "searching around the best designs") as note:
                 nearby = around(candidates, o.around, o.around_copies, o.around_spread,
                                 o.seed + len(candidates), buildable)  # fmt: skip
