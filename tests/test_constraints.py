@@ -190,7 +190,7 @@ def run(pool, curve, out, limits: Constraints, refine: bool = True):
 
     quick = RefineSettings(iterations=20, ordered_iterations=5)
     opts = DesignOptions(candidates=12, time_budget=600, refine_settings=quick, refine=refine,
-                         formats=frozenset({"mjcf"}), constraints=limits)  # fmt: skip
+                         formats=frozenset({"mjcf"}), constraints=limits, rounds=2)  # fmt: skip
     return design(curve, out, opts, proposer=propose, show=False)
 
 
