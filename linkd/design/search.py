@@ -70,9 +70,14 @@ def search_width(
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
     same few designs do not) and up to four rounds more, as many as the budget's deadline
     leaves time for. The deadline also stops refinement early on a slow or busy machine."""
-    steps = max(1, round(time_budget / 30))
+    steps = budget_steps(time_budget)
     more = 4 * (steps - 1)
     return rounds or 2 + more, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
+
+
+def budget_steps(time_budget: float) -> int:
+    """The budget in units of the default 30 s (at least one): what the search widens by."""
+    return max(1, round(time_budget / 30))
 
 
 def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
@@ -151,7 +156,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         # Copies of refined designs start near a good fit: one variant, the lighter ordered term,
         # and within the default budget fewer iterations (a longer one runs them all).
         nearby_settings = replace(settings, ordered_weights=settings.ordered_weights[:1])
-        if round(o.time_budget / 30) <= 1:
+        if budget_steps(o.time_budget) == 1:
             nearby_settings = replace(nearby_settings,
                                       iterations=min(settings.iterations, ROUND_ITERATIONS),
                                       ordered_iterations=min(settings.ordered_iterations,
