@@ -142,6 +142,21 @@ def test_design_is_deterministic_for_a_seed(pool, curve_file, tmp_path):
     assert texts[0] == texts[1]
 
 
+def test_design_does_not_depend_on_a_second_process(pool, curve_file, tmp_path, monkeypatch):
+    """Proposal and refinement run in two parts at once where they can, one after the other
+    where they cannot (`linkd.design.parallel`): the same design either way."""
+    from linkd.design import parallel
+
+    texts = []
+    for name, fork in (("both", True), ("alone", False)):
+        monkeypatch.setattr(parallel, "can_fork", lambda fork=fork: fork)
+        outcome = design(curve_file, tmp_path / name, options(seed=2),
+                         proposer=pool_proposer(pool), show=False)  # fmt: skip
+        assert outcome.design is not None
+        texts.append((tmp_path / name / "mechanism.json").read_text())
+    assert texts[0] == texts[1]
+
+
 def test_unrefined_single_sample_is_only_placed(pool, curve_file, tmp_path):
     """The one-shot setting: one sample, no refinement, only moved onto the curve."""
     single = options(candidates=1, refine=False, rotations=0, attempts=1)

@@ -40,6 +40,6 @@ def test_no_round_when_nothing_can_be_built():
 
 
 def test_a_longer_budget_searches_wider_unless_told():
-    assert search_width(30, None, None) == (2, 1024, 48)  # the defaults
-    assert search_width(120, None, None) == (14, 4096, 96)  # rounds until the deadline
+    assert search_width(30, None, None) == (3, 1024, 48)  # the defaults
+    assert search_width(120, None, None) == (15, 4096, 96)  # rounds until the deadline
     assert search_width(120, 1, 10, 4) == (1, 10, 4)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial, reduce
 
 import numpy as np
 import torch
@@ -21,6 +22,8 @@ from linkd.design.refine import resample_closed
 from linkd.geometry import rotation
 from linkd.sample import MOVES, spread
 from linkd.validator import validate
+
+from .parallel import PARTS, run_parts, split
 
 # (conditioning curves (C, 200, 2), samples per curve, seed) -> graph matrices (C * S, 20, 24)
 Proposer = Callable[[np.ndarray, int, int], np.ndarray]
@@ -104,11 +107,15 @@ def propose(
     proposer: Proposer, target: np.ndarray, count: int, rotations: int, seed: int
 ) -> np.ndarray:
     """Graph matrices of about `count` designs sampled for the normalised target (M, 2) and its
-    augmented copies (as many copies as there are designs to go round, at most)."""
+    augmented copies (as many copies as there are designs to go round, at most), the copies in
+    two parts at once (`parallel`), part k from seed `PARTS * seed + k`."""
     curves = augmented(target, rotations) if rotations > 0 else target[None]
-    curves = curves[: max(1, count)]
+    curves = curves[: max(1, count)].astype(np.float32)
     per_curve = -(-max(1, count) // len(curves))
-    return proposer(curves.astype(np.float32), per_curve, seed)
+    parts = split(np.arange(len(curves)))
+    calls = [partial(proposer, curves[part], per_curve, PARTS * seed + k)
+             for k, part in enumerate(parts)]  # fmt: skip
+    return np.concatenate(run_parts(calls))
 
 
 def sub_mechanisms(
@@ -153,9 +160,21 @@ def descriptor(curves: torch.Tensor) -> torch.Tensor:
 
 
 def place(batch: LinkageBatch, target: np.ndarray, source: np.ndarray | None = None) -> Candidates:
-    """Keep the valid linkages of `batch` and move each onto the target by its best similarity.
-    source: (B,) index into SOURCES of each linkage (default: all from the model)."""
+    """Keep the valid linkages of `batch` and move each onto the target by its best similarity,
+    in two parts at once (`parallel`); best first. source: (B,) index into SOURCES of each
+    linkage (default: all from the model)."""
     source = np.zeros(len(batch), int) if source is None else np.asarray(source)
+    parts = split(np.arange(len(batch)))
+    if len(parts) < 2:
+        return _placed(batch, target, source)
+    calls = [partial(_placed, batch.subset(part), target, source[part]) for part in parts]
+    both = reduce(merged, run_parts(calls))
+    order = np.argsort(both.chamfer, kind="stable")
+    return Candidates(both.batch.subset(order), both.chamfer[order], both.source[order])
+
+
+def _placed(batch: LinkageBatch, target: np.ndarray, source: np.ndarray) -> Candidates:
+    """`place` in one process."""
     result = validate(batch, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))

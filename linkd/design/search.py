@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import replace
-from functools import cache
+from functools import cache, partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,6 +26,7 @@ from linkd.validator import validate
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
 from .constrained import pin, rank, tightened
+from .parallel import PARTS, run_parts, split
 from .propose import (
     SOURCES,
     Candidates,
@@ -66,13 +67,13 @@ def search_width(
     refine_count: int | None = None,
 ) -> tuple[int, int, int]:
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
-    not given: two rounds, 1024 paths and 48 designs for the default 30 s; for every further
+    not given: three rounds, 1024 paths and 48 designs for the default 30 s; for every further
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
     same few designs do not) and up to four rounds more, as many as the budget's deadline
     leaves time for. The deadline also stops refinement early on a slow or busy machine."""
     steps = budget_steps(time_budget)
     more = 4 * (steps - 1)
-    return rounds or 2 + more, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
+    return rounds or 3 + more, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
 
 
 def budget_steps(time_budget: float) -> int:
@@ -201,26 +202,40 @@ def _refiner(
     deadline: float,
 ) -> Callable:
     """A function refining given rows of `candidates` in place (those never within the
-    refinement's limits get an infinite error: tried last); it returns the iterations run."""
+    refinement's limits get an infinite error: tried last), in two parts at once (`parallel`),
+    each keeping its share of the best variants for the last iterations; it returns the
+    iterations run."""
+    part_settings = replace(settings, keep=-(-settings.keep // PARTS))
 
     def refine_rows(candidates: Candidates, rows: np.ndarray, progress) -> int:
         if len(rows) == 0:
             return 0
-        subset = candidates.batch.subset(rows)
-        if stroke:
-            result, ranges = refine_stroke(subset, candidates.ranges[rows], goal, settings,
-                                           deadline)  # fmt: skip
-            candidates.ranges[rows[result.ok]] = ranges[result.ok]
-        else:
-            result = refine(subset, target, settings, deadline, constraints=inner or None,
-                            progress=progress)  # fmt: skip
-        ok = result.ok
-        candidates.batch.positions[rows[ok]] = result.positions[ok]
-        candidates.chamfer[rows] = np.where(ok, result.chamfer, np.inf)
-        candidates.refined[rows] = True
-        return result.iterations
+        parts = split(rows)
+        calls = [partial(_refine_part, candidates.batch.subset(part),
+                         candidates.ranges[part] if stroke else None, goal, target,
+                         part_settings, inner, deadline, progress if k == 0 else None)
+                 for k, part in enumerate(parts)]  # fmt: skip
+        done = 0
+        for part, (result, ranges) in zip(parts, run_parts(calls)):
+            ok = result.ok
+            if stroke:
+                candidates.ranges[part[ok]] = ranges[ok]
+            candidates.batch.positions[part[ok]] = result.positions[ok]
+            candidates.chamfer[part] = np.where(ok, result.chamfer, np.inf)
+            candidates.refined[part] = True
+            done = max(done, result.iterations)
+        return done
 
     return refine_rows
+
+
+def _refine_part(subset, ranges, goal, target, settings, inner, deadline, progress) -> tuple:
+    """(RefineResult, refined crank ranges or None) of one part (`_refiner`): a stroke when
+    `ranges` are given, else the closed `target`."""
+    if ranges is not None:
+        return refine_stroke(subset, ranges, goal, settings, deadline)
+    return refine(subset, target, settings, deadline, constraints=inner or None,
+                  progress=progress), None  # fmt: skip
 
 
 def _buildable() -> Callable[[LinkageBatch, int], bool]:
