@@ -3,7 +3,8 @@
 All samples of all curves grow together, one node per step, and only the samples still growing
 are computed. Node-level retry checks every proposed node at once with the incremental
 validator (`check_new_node`, one dyad each, the accepted prefix's joint paths kept) and
-resamples only the nodes that fail, up to `retries` times, keeping the best proposal seen.
+resamples only the nodes that fail, up to `retries` times, keeping the best proposal seen; a
+node that fails every one ends its graph at the joints before it, where they are a mechanism.
 """
 
 from __future__ import annotations
@@ -100,8 +101,9 @@ def _rounds(retries: int) -> list[int]:
 
 
 def _propose(model, context, t, paths, fixed, retries, steps, generator, null, w):
-    """Rows for node t of every growing sample; failing ones are resampled, up to `retries`
-    proposals each, drawn in rounds, keeping the best-scoring proposal."""
+    """Rows for node t of every growing sample and whether each is acceptable; failing ones are
+    resampled, up to `retries` proposals each, drawn in rounds, keeping the best-scoring
+    proposal."""
     index = torch.full((len(context),), t, dtype=torch.long, device=context.device)
     rows = model.denoise(context, index, steps, generator, null, w)
     ok, path, score = _check_node(rows, t, paths, fixed)
@@ -123,7 +125,28 @@ def _propose(model, context, t, paths, fixed, retries, steps, generator, null, w
             score2[best],
             ok2[best],
         )
-    return rows, path
+    return rows, path, ok
+
+
+def _end_failed(graphs, live, t, rows, ok, prefix_paths) -> torch.Tensor:
+    """The rows for node t, where the graphs whose node t failed every proposal end instead,
+    after their last joint that moves (the third or a later one; rows after it in `graphs`
+    become stop rows too): every prefix of a valid linkage is one, so they become valid,
+    shorter designs. Graphs with no such joint keep their best failing proposal."""
+    if t < 3:
+        return rows
+    index = torch.arange(t, device=rows.device)
+    moving = (spread(prefix_paths) > MOVES) & (index >= 2)  # (B, t)
+    last = torch.where(moving, index, -1).amax(1)
+    end = ~ok & (last >= 2)
+    if not end.any():
+        return rows
+    stop = empty_graphs(1, rows.device)[0, 0]
+    b, j = torch.nonzero(end[:, None] & (index > last[:, None]), as_tuple=True)
+    graphs[live[b], j] = stop
+    rows = rows.clone()
+    rows[end] = stop
+    return rows
 
 
 @torch.inference_mode()
@@ -156,9 +179,10 @@ def grow(
         context, null = (out[: len(live)], out[len(live) :]) if guided else (out, None)
         if check:
             fixed = graphs[live, :t, TYPE] > 0.5
-            rows, path = _propose(model, context, t, paths[live, :t], fixed, retries, steps,
-                                  generator, null, w)  # fmt: skip
+            rows, path, ok = _propose(model, context, t, paths[live, :t], fixed, retries, steps,
+                                      generator, null, w)  # fmt: skip
             paths[live, t] = path
+            rows = _end_failed(graphs, live, t, rows, ok, paths[live, :t])
         else:
             index = torch.full((len(live),), t, dtype=torch.long, device=device)
             rows = model.denoise(context, index, steps, generator, null, w)

@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from linkd import classic
-from linkd.graph import ADJ, MAX_NODES, VALID, to_graph
+from linkd.graph import ADJ, MAX_NODES, TYPE, VALID, to_graph
 from linkd.model import LinkD, LinkDConfig, load_checkpoint, save_checkpoint
-from linkd.model.linkd import to_rows, to_target
+from linkd.model.linkd import link_mask, to_rows, to_target
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -88,10 +88,30 @@ def test_diffused_form_decodes_back_to_the_graph():
     graphs = graphs_of(classic.jansen_leg(), classic.stephenson_six_bar())
     for graph in graphs:
         index = torch.arange(MAX_NODES)
-        np.testing.assert_array_equal(to_rows(to_target(graph), index).numpy(), graph.numpy())
+        for dyadic in (False, True):
+            rows = to_rows(to_target(graph), index, dyadic)
+            np.testing.assert_array_equal(rows.numpy(), graph.numpy())
     target = to_target(graphs)
     assert set(target[..., VALID].unique().tolist()) == {-1.0, 1.0}
     assert set(target[..., ADJ].unique().tolist()) == {-1.0, 1.0}
+
+
+def test_dyadic_decoding_gives_each_joint_the_links_of_a_dyad():
+    """A moving joint keeps its two likeliest links to earlier joints, the crank tip its one,
+    a ground joint none; each link on its own would keep every positive estimate."""
+    x0 = torch.full((4, 24), -1.0)
+    x0[:, VALID] = 1.0
+    x0[:, TYPE] = torch.tensor([1.0, -1.0, -1.0, 1.0])  # pivot, crank tip, joint, ground
+    x0[:, ADJ] = torch.linspace(-0.9, 0.9, 20)  # the later an earlier joint, the likelier
+    x0[1, ADJ.start] = -0.5  # the crank tip's only link is unlikely, yet the one it must have
+    index = torch.tensor([0, 1, 5, 6])
+    rows = to_rows(x0, index, dyadic=True)
+    links = (rows[:, ADJ] == 1).int()
+    assert links.sum(1).tolist() == [0, 1, 2, 0]
+    assert links[1, 0] == 1 and links[2, 3:5].tolist() == [1, 1]  # the likeliest two
+    assert (rows[:, ADJ][~link_mask(index)] == -1).all()  # no links to later joints
+    plain = (to_rows(x0, index)[:, ADJ] == 1).sum(1).tolist()
+    assert plain == [0, 0, 0, 0]  # only positive estimates: the first joints' are negative
 
 
 def test_checkpoint_round_trip(tmp_path):

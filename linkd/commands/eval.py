@@ -26,6 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--coins", action=argparse.BooleanOptionalAction, default=None,
                    help="draw validity and type as coins (default: the model's; --no-coins: "
                         "deterministic DDIM, the likelier side)")  # fmt: skip
+    p.add_argument("--dyadic", action=argparse.BooleanOptionalAction, default=None,
+                   help="decode a joint's links as a dyad's: a moving joint's two likeliest, "
+                        "a ground joint's none (default: the model's; --no-dyadic: each link "
+                        "on its own)")  # fmt: skip
     p.add_argument("--retries", type=int, default=25)
     p.add_argument("--steps", type=int, help="DDIM steps (default: the model's)")
     p.add_argument(
@@ -71,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         model.config.guidance = args.guidance
     if args.coins is not None:
         model.config.sample_coins = args.coins
+    if args.dyadic is not None:
+        model.config.sample_dyadic = args.dyadic
     progress = sys.stdout.isatty()
     for target in targets:
         results = ev.evaluate(model, target, strategies, tuple(range(args.seeds)), args.retries,
@@ -78,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
         results["checkpoint"] = args.checkpoint or "shipped"
         results["guidance"] = model.config.guidance
         results["coins"] = model.config.sample_coins
+        results["dyadic"] = model.config.sample_dyadic
         if target.graphs is not None:
             curves = torch.as_tensor(target.conditioning)
             results["conditioning"] = ev.conditioning_gap(model, target.graphs, curves)

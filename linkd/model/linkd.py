@@ -41,6 +41,8 @@ class LinkDConfig:
     curve_dropout: float = 0.0  # training: share of graphs shown the null curve (for guidance)
     guidance: float = 1.0  # default classifier-free guidance scale at inference (1: none)
     sample_coins: bool = True  # draw validity and type as coins (False: deterministic DDIM)
+    sample_dyadic: bool = False  # decode a joint's links as a dyad's (`to_rows`): more valid
+    # one-shot samples, but farther from their curves, and worse proposals for `linkd design`
     canonical: bool = False  # read curves and place joints in the curve's principal frame
 
 
@@ -56,15 +58,28 @@ def to_target(rows: torch.Tensor) -> torch.Tensor:
     return target
 
 
-def to_rows(x0: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
-    """Clean estimates (M, 24) of nodes `index` (M,) -> decoded graph-matrix rows."""
+def to_rows(x0: torch.Tensor, index: torch.Tensor, dyadic: bool = False) -> torch.Tensor:
+    """Clean estimates (M, 24) of nodes `index` (M,) -> decoded graph-matrix rows.
+
+    dyadic: a joint's links as a dyad has them, the way every valid graph is built: a moving
+    joint gets its two likeliest links to earlier joints (the crank tip its one, to the pivot),
+    a ground joint none. Otherwise each link is kept where its estimate is positive.
+    """
     valid = x0[:, VALID] > 0
+    ground = x0[:, TYPE] > 0
     rows = torch.full_like(x0, -1.0)
     rows[:, VALID] = valid.to(x0.dtype)
-    rows[:, TYPE] = torch.where(valid, (x0[:, TYPE] > 0).to(x0.dtype), -1.0)
+    rows[:, TYPE] = torch.where(valid, ground.to(x0.dtype), -1.0)
     rows[:, XY] = torch.where(valid[:, None], x0[:, XY].clamp(-1, 1), 0.0)
-    links = (x0[:, ADJ] > 0).to(x0.dtype)
-    rows[:, ADJ] = torch.where(valid[:, None] & link_mask(index), links, -1.0)
+    earlier = link_mask(index)
+    if dyadic:
+        score = x0[:, ADJ].masked_fill(~earlier, -torch.inf)
+        rank = score.argsort(dim=1, descending=True, stable=True).argsort(dim=1)
+        wanted = torch.where(ground, 0, index.clamp(max=2))
+        links = (rank < wanted[:, None]).to(x0.dtype)
+    else:
+        links = (x0[:, ADJ] > 0).to(x0.dtype)
+    rows[:, ADJ] = torch.where(valid[:, None] & earlier, links, -1.0)
     return rows
 
 
@@ -195,7 +210,7 @@ class LinkD(nn.Module):
 
         x0 = ddim_sample(predict, noise, self.alpha_bar, steps or c.sample_steps, c.sample_eta,
                          generator)  # fmt: skip
-        return to_rows(x0, index)
+        return to_rows(x0, index, c.sample_dyadic)
 
 
 def _hold(x0: torch.Tensor, held: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
