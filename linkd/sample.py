@@ -4,7 +4,8 @@ All samples of all curves grow together, one node per step, and only the samples
 are computed. Node-level retry checks every proposed node at once with the incremental
 validator (`check_new_node`, one dyad each, the accepted prefix's joint paths kept) and
 resamples only the nodes that fail, up to `retries` times, keeping the best proposal seen; a
-node that fails every one ends its graph at the joints before it, where they are a mechanism.
+node that fails every one ends its graph after the last earlier joint that moves (every prefix
+of a valid linkage is one).
 """
 
 from __future__ import annotations
