@@ -65,15 +65,19 @@ def search_width(
     rounds: int | None,
     atlas_paths: int | None,
     refine_count: int | None = None,
+    stroke: bool = False,
 ) -> tuple[int, int, int]:
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
     not given: three rounds, 1024 paths and 48 designs for the default 30 s; for every further
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
     same few designs do not) and up to four rounds more, as many as the budget's deadline
-    leaves time for. The deadline also stops refinement early on a slow or busy machine."""
+    leaves time for. The deadline also stops refinement early on a slow or busy machine.
+    An open or timed `stroke` has one round (searching around the best works on closed loops)
+    and spends the later rounds' time on refining three times as many designs in it."""
     steps = budget_steps(time_budget)
     more = 4 * (steps - 1)
-    return rounds or 3 + more, atlas_paths or 1024 * steps, refine_count or 16 * (2 + steps)
+    count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
+    return 1 if stroke else rounds or 3 + more, atlas_paths or 1024 * steps, count
 
 
 def budget_steps(time_budget: float) -> int:
@@ -89,8 +93,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     stroke = not goal.closed or goal.timed
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
-                                                     o.refine_count)
-    rounds = 1 if stroke else rounds  # searching around the best works on closed loops
+                                                     o.refine_count, stroke)  # fmt: skip
     report["rounds"], report["refine_count"] = rounds, refine_count
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         report["proposer"] = o.proposer
