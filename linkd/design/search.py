@@ -77,7 +77,8 @@ def search_width(
     steps = budget_steps(time_budget)
     more = 4 * (steps - 1)
     count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
-    return 1 if stroke else rounds or 3 + more, atlas_paths or 1024 * steps, count
+    rounds = 1 if stroke else (rounds or 3 + more)
+    return rounds, atlas_paths or 1024 * steps, count
 
 
 def budget_steps(time_budget: float) -> int:
