@@ -1,15 +1,17 @@
-"""Later rounds search around designs the export can build (linkd.design.rounds)."""
+"""Later rounds grow designs the export can build by a joint (linkd.design.rounds)."""
 
 import numpy as np
+import pytest
 from test_export_narrow import KNOTTED, SNARLED, TANGLED
 
 from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design.propose import Candidates
-from linkd.design.rounds import around
+from linkd.design.rounds import around, with_coupler_point
 from linkd.design.search import _buildable, search_width
 from linkd.design.select import topology_key
 from linkd.export import buildable
+from linkd.validator import validate
 
 
 def test_buildable_says_what_export_would_do():
@@ -27,16 +29,56 @@ def test_rounds_pass_over_a_better_design_that_cannot_be_built():
     check = _buildable()
     nearby = around(candidates, count=2, copies=3, spread=0.1, seed=0, buildable=check)
     assert len(nearby) == 3
-    plain = topology_key(batch, 1)
-    assert all(topology_key(nearby, row) == plain for row in range(len(nearby)))
+    plain = batch.subset(np.array([1]))
+    n = int(plain.valid.sum())
+    for row in range(len(nearby)):  # the crank-rocker, grown by a joint
+        assert nearby.valid[row].sum() == n + 1
+        assert (nearby.adjacency[row, :n, :n] == plain.adjacency[0, :n, :n]).all()
+        assert np.allclose(nearby.positions[row, :n], plain.positions[0, :n])
     # Without the check, the refused design's neighbourhood is searched first.
     unchecked = around(candidates, count=2, copies=3, spread=0.1, seed=0)
-    assert topology_key(unchecked, 0) == topology_key(batch, 0)
+    refused = topology_key(batch, 0)  # with no room to grow: jittered
+    assert any(topology_key(unchecked, row) == refused for row in range(len(unchecked)))
 
 
 def test_no_round_when_nothing_can_be_built():
     candidates = Candidates(LinkageBatch.from_mechanisms([SNARLED]), np.array([0.1]))
     assert len(around(candidates, 4, 3, 0.1, 0, _buildable())) == 0
+
+
+def test_a_grown_joint_is_a_coupler_point_and_the_end_effector():
+    grown = with_coupler_point(_padded_crank_rocker(64), np.random.default_rng(0))
+    assert (grown.end_effector == 5).all() and (grown.valid.sum(1) == 6).all()
+    motion = validate(grown, keep_motion=True, backend="numpy")  # float64
+    assert motion.valid.all()  # rigid with a link: valid wherever it starts
+    xy = np.stack([motion.motion.x, motion.motion.y], -1)  # (B, N, T, 2)
+    for row in range(len(grown)):
+        parents = np.flatnonzero(grown.adjacency[row, 5])
+        assert len(parents) == 2 and not grown.fixed[row, parents].any()
+        assert grown.adjacency[row, parents[0], parents[1]]
+        for p in parents:  # at a constant distance from both ends of its link
+            d = np.linalg.norm(xy[row, 5] - xy[row, p], axis=-1)
+            assert np.ptp(d) < 1e-9 * max(d.mean(), 1.0)
+    # Half start near the end effector's old path, the rest anywhere about a link.
+    old = np.linalg.norm(grown.positions[:, 5] - grown.positions[:, 4], axis=-1)
+    assert 0.2 < (old < 0.5).mean() < 0.9
+
+
+@pytest.mark.parametrize("max_joints", [5, None])
+def test_designs_with_no_room_to_grow_are_jittered(max_joints):
+    # Five joints: at the limit asked for, or padded to no more than that.
+    batch = _padded_crank_rocker(1, 5 if max_joints is None else 20)
+    candidates = Candidates(batch, np.array([0.1]))
+    nearby = around(candidates, 1, 6, 0.1, seed=0, max_joints=max_joints)
+    assert len(nearby) == 6
+    assert all(topology_key(nearby, row) == topology_key(batch, 0) for row in range(6))
+    assert not np.allclose(nearby.positions, batch.positions)
+
+
+def _padded_crank_rocker(count: int, joints: int = 20) -> LinkageBatch:
+    graphs = np.full((count, joints, 24), -1.0, np.float32)
+    graphs[:, :5] = LinkageBatch.from_mechanisms([classic.crank_rocker()]).to_graphs()[0]
+    return LinkageBatch.from_graphs(graphs)
 
 
 def test_a_longer_budget_searches_wider_unless_told():

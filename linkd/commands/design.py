@@ -97,8 +97,8 @@ def add_search_options(p: argparse.ArgumentParser) -> None:
                    help="atlas of mechanisms to look the shape up in: a file from "
                         "`linkd atlas build`, 'shipped' (default) or 'none'")  # fmt: skip
     p.add_argument("--rounds", type=int, default=None,
-                   help="refinement rounds, each after the first searching around the best "
-                        "designs (default: from the time budget)")  # fmt: skip
+                   help="refinement rounds, each after the first growing the best designs "
+                        "by a joint (default: from the time budget)")  # fmt: skip
     p.add_argument("--smooth", type=float, default=0.0,
                    help="smooth a shaky drawing: Gaussian width as a fraction of the curve's "
                         "length (e.g. 0.005; default 0, the curve as drawn)")  # fmt: skip

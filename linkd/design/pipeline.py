@@ -89,8 +89,8 @@ class DesignOptions:
     rounds: int | None = None  # refinement rounds, each after the first searching around the
     # best so far (None: from the budget)
     around: int = 4  # designs (of distinct topologies) searched around
-    around_copies: int = 16  # jittered copies of each
-    around_spread: float = 0.1  # their joints move by this much (normalised frame)
+    around_copies: int = 16  # copies of each, grown by a joint (rounds.py)
+    around_spread: float = 0.1  # joints of copies with no room to grow move by this much
 
 
 @dataclass

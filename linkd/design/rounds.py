@@ -1,11 +1,14 @@
-"""The search around the best designs: jittered copies of the best few, refined in turn.
+"""The search around the best designs: grown copies of the best few, refined in turn.
 
-Refinement settles each candidate in the nearest local minimum of the curve error. Near the
-best of them there are often better ones a step away, across a ridge L-BFGS does not cross; a
-round samples that neighbourhood by moving every joint of the best few designs at random, at a
-few scales, and refines the copies that are still valid mechanisms (basin hopping, batched).
-Only designs that can be built are searched around: a neighbourhood of a design the export
-refuses mostly holds designs it refuses too, which delivery would pass over.
+Refinement settles each candidate in the nearest local minimum of the curve error, with its
+topology fixed. A round takes the best few designs a step further: each copy gains one joint,
+rigid with one of its links (hung on the link's two joints, so the copy is valid whatever the
+link's motion) and made the end effector. Its path is that link's coupler curve, and it starts
+near the old end effector's path on half the copies, so refinement begins close to the best fit
+so far with two more degrees of freedom for the shape, and anywhere on the link on the rest.
+Designs with no room for a joint more have their joints moved at random instead (basin
+hopping). Only designs that can be built are searched around: a neighbourhood of a design the
+export refuses mostly holds designs it refuses too, which delivery would pass over.
 """
 
 from __future__ import annotations
@@ -16,10 +19,11 @@ import numpy as np
 
 from linkd.batch import LinkageBatch
 
-from .propose import Candidates
+from .propose import Candidates, joined
 from .select import topology_key
 
 MAX_CHECKS = 3  # topologies asked about, per design searched around
+NEAR_END_EFFECTOR = 0.5  # share of grown copies whose new joint starts near the end effector
 
 
 def around(
@@ -29,11 +33,13 @@ def around(
     spread: float,
     seed: int,
     buildable: Callable[[LinkageBatch, int], bool] = lambda batch, row: True,
+    max_joints: int | None = None,
 ) -> LinkageBatch:
-    """`copies` jittered copies of each of the best `count` candidates of distinct topologies
-    (refined or not, by their latest error) that are `buildable` (a topology whose best design
-    is not is passed over); joints move by Gaussian steps of `spread` times 1/4, 1/2 and 1 in
-    turn."""
+    """`copies` copies of each of the best `count` candidates of distinct topologies (refined or
+    not, by their latest error) that are `buildable` (a topology whose best design is not is
+    passed over): grown by a coupler point where they have fewer than `max_joints` joints (and
+    the batch room for one more), else with joints moved by Gaussian steps of `spread` times
+    1/4, 1/2 and 1 in turn."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
     best, seen = [], set()
@@ -46,10 +52,55 @@ def around(
             break
         if buildable(candidates.batch, int(row)):
             best.append(int(row))
-    rows = np.repeat(np.array(best, dtype=int), copies)
-    batch = candidates.batch.subset(rows)
+    batch = candidates.batch.subset(np.repeat(np.array(best, dtype=int), copies))
     rng = np.random.default_rng(seed)
-    scale = spread * np.resize([0.25, 0.5, 1.0], len(rows))[:, None, None]
+    limit = min(max_joints or batch.valid.shape[1], batch.valid.shape[1])
+    room = (batch.valid.sum(1) < limit) & _moving_links(batch).any((1, 2))
+    grown = with_coupler_point(batch.subset(np.flatnonzero(room)), rng)
+    return joined([grown, jittered(batch.subset(np.flatnonzero(~room)), spread, rng)])
+
+
+def with_coupler_point(batch: LinkageBatch, rng: np.random.Generator) -> LinkageBatch:
+    """Each linkage (with room for a joint more and a link between two moving joints) with a new
+    last joint on two joints linked to each other, both moving, as its end effector: at random
+    near the end effector on one of its links (a NEAR_END_EFFECTOR share), else anywhere about
+    a random link."""
+    b, n = batch.valid.shape
+    rows, joints = np.arange(b), np.arange(n)
+    links = _moving_links(batch)
+    ee = batch.end_effector
+    at_ee = links & ((joints == ee[:, None])[:, :, None] | (joints == ee[:, None])[:, None, :])
+    near = (rng.random(b) < NEAR_END_EFFECTOR) & at_ee.any((1, 2))
+    pool = np.where(near[:, None, None], at_ee, links)
+    pick = np.where(pool, rng.random(pool.shape), -1.0).reshape(b, n * n).argmax(1)
+    first, second = np.unravel_index(pick, (n, n))
+    swap = second == ee  # start from the end effector's end
+    first, second = np.where(swap, second, first), np.where(swap, first, second)
+    start = batch.positions[rows, first]
+    along = batch.positions[rows, second] - start
+    across = np.stack([-along[:, 1], along[:, 0]], 1)
+    s = np.where(near, rng.normal(0, 0.15, b), rng.uniform(-0.5, 1.5, b))
+    t = np.where(near, rng.normal(0, 0.15, b), rng.normal(0, 0.5, b))
+    new = batch.valid.sum(1)  # valid joints come first
+    batch.positions[rows, new] = start + s[:, None] * along + t[:, None] * across
+    batch.valid[rows, new] = True
+    batch.fixed[rows, new] = False
+    for ends in (first, second):
+        batch.adjacency[rows, new, ends] = batch.adjacency[rows, ends, new] = True
+    batch.end_effector = new
+    return batch
+
+
+def jittered(batch: LinkageBatch, spread: float, rng: np.random.Generator) -> LinkageBatch:
+    """The linkages with every joint moved by Gaussian steps of `spread` times 1/4, 1/2 and 1 in
+    turn."""
+    scale = spread * np.resize([0.25, 0.5, 1.0], len(batch))[:, None, None]
     step = rng.normal(size=batch.positions.shape) * scale
     batch.positions = batch.positions + np.where(batch.valid[..., None], step, 0)
     return batch
+
+
+def _moving_links(batch: LinkageBatch) -> np.ndarray:
+    """(B, N, N) links between two moving joints, each once (upper triangle)."""
+    moving = batch.valid & ~batch.fixed
+    return np.triu(batch.adjacency, 1) & moving[:, :, None] & moving[:, None, :]

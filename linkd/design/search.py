@@ -3,7 +3,7 @@
 Candidates come from the proposer (LinkD, or the curve-blind generator) and from the atlas of
 precomputed mechanisms; each valid one offers its sub-mechanisms, is placed on the target by
 its best similarity (or, on an open or timed target, its best sub-arc of crank angles too),
-and the best few are refined, in rounds that search around the best so far on closed loops.
+and the best few are refined, in rounds that grow the best so far by a joint on closed loops.
 The designer's constraints (in the target's normalised frame) prune, pin, rank and bound the
 candidates throughout.
 """
@@ -171,9 +171,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         for _ in range(rounds - 1):
             if time.monotonic() > deadline:
                 break
-            with stages.stage("round", "searching around the best designs") as note:
+            with stages.stage("round", "growing the best designs by a joint") as note:
                 nearby = around(candidates, o.around, o.around_copies, o.around_spread,
-                                o.seed + len(candidates), buildable)  # fmt: skip
+                                o.seed + len(candidates), buildable, inner.max_joints)  # fmt: skip
                 if len(nearby) == 0:
                     note("no design that can be built to search around")
                     break
