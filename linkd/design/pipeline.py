@@ -86,8 +86,8 @@ class DesignOptions:
     atlas_path: str | None = None  # None: the shipped atlas
     atlas_paths: int | None = None  # paths looked up, nearest first (None: from the budget)
     smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
-    rounds: int | None = None  # refinement rounds, each after the first searching around the
-    # best so far (None: from the budget)
+    rounds: int | None = None  # refinement rounds, each after the first growing the best so
+    # far by a joint (None: from the budget)
     around: int = 4  # designs (of distinct topologies) searched around
     around_copies: int = 16  # copies of each, grown by a joint (rounds.py)
     around_spread: float = 0.1  # joints of copies with no room to grow move by this much

@@ -61,15 +61,15 @@ def around(
 
 
 def with_coupler_point(batch: LinkageBatch, rng: np.random.Generator) -> LinkageBatch:
-    """Each linkage (with room for a joint more and a link between two moving joints) with a new
-    last joint on two joints linked to each other, both moving, as its end effector: at random
-    near the end effector on one of its links (a NEAR_END_EFFECTOR share), else anywhere about
-    a random link."""
+    """The linkages (each with room for a joint more and a link between moving joints), each
+    with a new last joint, its end effector, hung on both ends of one such link: near the old
+    end effector on one of its links (a NEAR_END_EFFECTOR share), else anywhere about any."""
     b, n = batch.valid.shape
-    rows, joints = np.arange(b), np.arange(n)
+    rows = np.arange(b)
     links = _moving_links(batch)
     ee = batch.end_effector
-    at_ee = links & ((joints == ee[:, None])[:, :, None] | (joints == ee[:, None])[:, None, :])
+    is_ee = np.arange(n) == ee[:, None]
+    at_ee = links & (is_ee[:, :, None] | is_ee[:, None, :])
     near = (rng.random(b) < NEAR_END_EFFECTOR) & at_ee.any((1, 2))
     pool = np.where(near[:, None, None], at_ee, links)
     pick = np.where(pool, rng.random(pool.shape), -1.0).reshape(b, n * n).argmax(1)
