@@ -161,6 +161,7 @@ def _worker(rank: int, world: int, port: int, config, data) -> None:
     dist.gather(flat, gathered, dst=0)
     if rank == 0:
         torch.save(torch.stack(gathered), f"{config.out}/gathered.pt")
+    dist.barrier()  # no rank leaves (closing its sockets) while another still talks to it
     dist.destroy_process_group()
 
 
