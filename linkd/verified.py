@@ -20,7 +20,7 @@ from linkd.mechanism import Mechanism
 from linkd.verify import Report, verify_output
 from linkd.verify.checks import DYNAMIC_PATH_RTOL, LOOP_RTOL
 
-FINEST = TIMESTEP / 8  # s: the finest step tried (its dynamics check runs 8 times as long)
+FINEST = TIMESTEP / 16  # s: the finest step tried (its dynamics check runs 16 times as long)
 
 
 def export_verified(
