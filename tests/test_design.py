@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from linkd import classic
-from linkd.batch import LinkageBatch
+from linkd.batch import LinkageBatch, ancestors
 from linkd.curves import normalise, read_curve, resample, write_curve
 from linkd.design.pipeline import DesignOptions, design
 from linkd.design.propose import augmented, place, sub_mechanisms
@@ -124,6 +124,9 @@ def test_design_writes_a_verified_export_on_the_users_curve(pool, curve_file, tm
     target = read_curve(curve_file)
     assert curve_error(end_effector_path(mech)[0], target) < 0.01
     assert mech.extra["metrics"]["chamfer"] == pytest.approx(report["design"]["chamfer"])
+    # Every joint carries the end effector (what growth leaves behind is pruned).
+    delivered = LinkageBatch.from_mechanisms([mech])
+    assert ancestors(delivered.adjacency, delivered.end_effector).all()
     # One alternative, of another topology, verified as well.
     (alt,) = report["alternatives"]
     alt_mech = Mechanism.load(out / alt["folder"] / "mechanism.json")

@@ -11,7 +11,17 @@ from linkd.design.rounds import around, with_coupler_point
 from linkd.design.search import _buildable, search_width
 from linkd.design.select import topology_key
 from linkd.export import buildable
+from linkd.mechanism import Mechanism
 from linkd.validator import validate
+
+# Generated (seed 2026, no. 243, its end effector's sub-mechanism): a design with no joint to
+# prune that no construction builds.
+STUBBORN = Mechanism(
+    [(95.4, -42.0), (67.9, -61.2), (76.6, 63.3), (65.5, -12.5), (-15.0, -51.2), (82.7, 34.7),
+     (10.0, 49.4), (-27.4, -33.2)],
+    [1, 0, 0, 1, 0, 1, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 7), (2, 4), (3, 4), (4, 6), (5, 6), (6, 7)], (0, 1), 7,
+)  # fmt: skip
 
 
 def test_buildable_says_what_export_would_do():
@@ -21,10 +31,11 @@ def test_buildable_says_what_export_would_do():
     assert buildable(KNOTTED)  # with its crank split on a ground bracket
     assert not buildable(KNOTTED, quick=True)
     assert buildable(classic.crank_rocker(), quick=True)
+    assert not buildable(STUBBORN)
 
 
 def test_rounds_pass_over_a_better_design_that_cannot_be_built():
-    batch = LinkageBatch.from_mechanisms([SNARLED, classic.crank_rocker()])
+    batch = LinkageBatch.from_mechanisms([STUBBORN, classic.crank_rocker()])
     candidates = Candidates(batch, np.array([0.1, 0.2]))  # the refused one ranks first
     check = _buildable()
     nearby = around(candidates, count=2, copies=3, spread=0.1, seed=0, buildable=check)
@@ -42,7 +53,7 @@ def test_rounds_pass_over_a_better_design_that_cannot_be_built():
 
 
 def test_no_round_when_nothing_can_be_built():
-    candidates = Candidates(LinkageBatch.from_mechanisms([SNARLED]), np.array([0.1]))
+    candidates = Candidates(LinkageBatch.from_mechanisms([STUBBORN]), np.array([0.1]))
     assert len(around(candidates, 4, 3, 0.1, 0, _buildable())) == 0
 
 

@@ -44,6 +44,7 @@ from .constrained import screen
 from .drawn import read_target
 from .output import SKIP_REASONS, Delivered, deliver, finish, summary
 from .propose import SOURCES, Candidates, Proposer
+from .prune import pruned
 from .refine import RefineSettings, single_thread
 from .search import N_POINTS, NoDesign, search
 from .select import to_mechanism, topology_key
@@ -231,10 +232,10 @@ def _deliver(
 
 
 def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions, crank_range=None) -> tuple:
-    """The candidate `row` in the user's frame and units, its crank pivot exactly on the motor
-    point if one was given, and each constraint measured on it; no mechanism (None) when one
-    of them does not hold."""
-    mech = to_mechanism(batch, row, frame, o.units, crank_range)
+    """The candidate `row`, pruned of joints its end effector does not need (`prune`), in the
+    user's frame and units, its crank pivot exactly on the motor point if one was given, and
+    each constraint measured on it; no mechanism (None) when one of them does not hold."""
+    mech = to_mechanism(pruned(batch.subset([row])), 0, frame, o.units, crank_range)
     c = o.constraints
     if not c:
         return mech, []
@@ -247,17 +248,20 @@ def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions, crank_range
 
 
 def _alternatives(candidates, order, chosen, frame, points, o, stage, source) -> list[dict]:
-    """Up to `o.top` verified designs of topologies other than the chosen one, best first."""
+    """Up to `o.top` verified designs of topologies other than the chosen one (as delivered,
+    pruned), best first."""
     batch = candidates.batch
-    seen = {topology_key(batch, chosen)}
+    seen = {_pruned_key(batch, chosen)}
     rows = []
-    for row in order:
-        key = topology_key(batch, int(row))
+    for row in map(int, order):
+        key = _pruned_key(batch, row)
         if key not in seen:
             seen.add(key)
-            rows.append(int(row))
+            rows.append(row)
+            if len(rows) == o.attempts * o.top:
+                break
     listed: list[dict] = []
-    for row in rows[: o.attempts * o.top]:
+    for row in rows:
         mech, measured = _checked(batch, row, frame, o, _range(candidates, row))
         if mech is None:
             continue
@@ -277,6 +281,11 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if folder.exists() and not any(folder.iterdir()):
             folder.rmdir()
     return listed
+
+
+def _pruned_key(batch: LinkageBatch, row: int) -> bytes:
+    """The topology of a candidate as delivery exports it: pruned."""
+    return topology_key(pruned(batch.subset([row])), 0)
 
 
 def _range(candidates: Candidates, row: int) -> tuple[float, float] | None:

@@ -3,11 +3,13 @@
 Refinement settles each candidate in the nearest local minimum of the curve error, with its
 topology fixed. A round takes the best few designs a step further: each copy gains one joint,
 rigid with one of its links (hung on the link's two joints, so the copy is valid whatever the
-link's motion) and made the end effector. Its path is that link's coupler curve, and it starts
-near the old end effector's path on half the copies, so refinement begins close to the best fit
-so far with two more degrees of freedom for the shape, and anywhere on the link on the rest.
-Designs with no room for a joint more have their joints moved at random instead (basin
-hopping). Only designs that can be built are searched around: a neighbourhood of a design the
+link's motion) and made the end effector. Its path is a coupler curve of that link's body: on
+half the copies it starts near the old end effector on one of its links, so refinement begins
+close to the best fit so far with the end effector free to move onto a neighbouring body, and
+anywhere about any link on the rest. Designs with no room for a joint more have their joints
+moved at random instead (basin hopping). The designs are pruned first (`prune`): the supports
+of an earlier grown joint that nothing else needs fall out, so growth does not pile up idle
+joints. Only designs that can be built are searched around: a neighbourhood of a design the
 export refuses mostly holds designs it refuses too, which delivery would pass over.
 """
 
@@ -20,6 +22,7 @@ import numpy as np
 from linkd.batch import LinkageBatch
 
 from .propose import Candidates, joined
+from .prune import pruned
 from .select import topology_key
 
 MAX_CHECKS = 3  # topologies asked about, per design searched around
@@ -52,7 +55,8 @@ def around(
             break
         if buildable(candidates.batch, int(row)):
             best.append(int(row))
-    batch = candidates.batch.subset(np.repeat(np.array(best, dtype=int), copies))
+    batch = pruned(candidates.batch.subset(np.array(best, dtype=int)))
+    batch = batch.subset(np.repeat(np.arange(len(best)), copies))
     rng = np.random.default_rng(seed)
     limit = min(max_joints or batch.valid.shape[1], batch.valid.shape[1])
     room = (batch.valid.sum(1) < limit) & _moving_links(batch).any((1, 2))
