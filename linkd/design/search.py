@@ -71,12 +71,12 @@ def search_width(
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
     not given: three rounds, 1024 paths and 48 designs for the default 30 s; for every further
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
-    same few designs do not) and up to four rounds more, as many as the budget's deadline
+    same few designs do not) and up to eight rounds more, as many as the budget's deadline
     leaves time for. The deadline also stops refinement early on a slow or busy machine.
     An open or timed `stroke` has one round (searching around the best works on closed loops)
     and spends the later rounds' time on refining three times as many designs in it."""
     steps = budget_steps(time_budget)
-    more = 4 * (steps - 1)
+    more = 8 * (steps - 1)
     count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
     rounds = 1 if stroke else (rounds or 3 + more)
     return rounds, atlas_paths or 1024 * steps, count
