@@ -24,7 +24,8 @@ MIN_REACH = 0.1  # nor closer than this to either of them (normalised frame: RMS
 def pruned(batch: LinkageBatch) -> LinkageBatch:
     """The linkages (valid joints first, in dyadic order) with rigid joints hung on their body's
     first joints where that is well-conditioned, and the joints the end effector then does not
-    need removed; the motor pivot and crank tip stay joints 0 and 1, the order is kept."""
+    need removed; the motor pivot and crank tip stay joints 0 and 1, the order is kept. (A
+    Python loop over the linkages: for the few designs a round or delivery handles.)"""
     out = batch.subset(np.arange(len(batch)))  # a copy
     for row in range(len(out)):
         _rehang(out, row)

@@ -39,24 +39,24 @@ def around(
     max_joints: int | None = None,
 ) -> LinkageBatch:
     """`copies` copies of each of the best `count` candidates of distinct topologies (refined or
-    not, by their latest error) that are `buildable` (a topology whose best design is not is
-    passed over): grown by a coupler point where they have fewer than `max_joints` joints (and
-    the batch room for one more), else with joints moved by Gaussian steps of `spread` times
-    1/4, 1/2 and 1 in turn."""
+    not, by their latest error), pruned, that are `buildable` (a topology whose best design is
+    not is passed over): grown by a coupler point where they have fewer than `max_joints`
+    joints (and the batch room for one more), else with joints moved by Gaussian steps of
+    `spread` times 1/4, 1/2 and 1 in turn."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
-    best, seen = [], set()
+    best, seen = [candidates.batch.subset(np.zeros(0, int))], set()  # (none keeps the shape)
     for row in order:
         key = topology_key(candidates.batch, int(row))
         if key in seen:
             continue
         seen.add(key)
-        if len(seen) > MAX_CHECKS * count or len(best) == count:
+        if len(seen) > MAX_CHECKS * count or len(best) > count:
             break
-        if buildable(candidates.batch, int(row)):
-            best.append(int(row))
-    batch = pruned(candidates.batch.subset(np.array(best, dtype=int)))
-    batch = batch.subset(np.repeat(np.arange(len(best)), copies))
+        design = pruned(candidates.batch.subset([int(row)]))
+        if buildable(design, 0):
+            best.append(design)
+    batch = joined(best).subset(np.repeat(np.arange(len(best) - 1), copies))
     rng = np.random.default_rng(seed)
     limit = min(max_joints or batch.valid.shape[1], batch.valid.shape[1])
     room = (batch.valid.sum(1) < limit) & _moving_links(batch).any((1, 2))

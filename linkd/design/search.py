@@ -39,7 +39,6 @@ from .propose import (
     random_proposer,
     sub_mechanisms,
 )
-from .prune import pruned
 from .refine import RefineSettings, refine
 from .rounds import around
 from .select import diverse_best, to_mechanism, topology_key
@@ -244,17 +243,15 @@ def _refine_part(subset, ranges, goal, target, settings, inner, deadline, progre
 
 
 def _buildable() -> Callable[[LinkageBatch, int], bool]:
-    """Whether a candidate, as it stands and pruned as delivery prunes it, could be exported
-    with straight links at the usual width (layering is the same in any similar frame, so the
-    normalised one serves; the few designs that need narrower or bent links are not searched
-    around); remembered per design."""
+    """Whether a candidate, as it stands, could be exported with straight links at the usual
+    width (layering is the same in any similar frame, so the normalised one serves; the few
+    designs that need narrower or bent links are not searched around); remembered per design."""
     known: dict[bytes, bool] = {}
 
     def buildable(batch: LinkageBatch, row: int) -> bool:
         key = topology_key(batch, row) + batch.positions[row].tobytes()
         if key not in known:
-            mech = to_mechanism(pruned(batch.subset([row])), 0, Similarity(), "mm")
-            known[key] = can_build(mech, quick=True)
+            known[key] = can_build(to_mechanism(batch, row, Similarity(), "mm"), quick=True)
         return known[key]
 
     return buildable
