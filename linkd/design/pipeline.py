@@ -90,7 +90,8 @@ class DesignOptions:
     rounds: int | None = None  # refinement rounds, each after the first growing the best so
     # far by a joint (None: from the budget)
     around: int = 4  # designs (of distinct topologies) searched around
-    around_copies: int = 16  # copies of each, grown by a joint (rounds.py)
+    around_copies: int = 128  # copies of each, grown by a joint (rounds.py), all placed on the
+    # target and only the best refined: placing a copy costs a fraction of refining it
     around_spread: float = 0.1  # joints of copies with no room to grow move by this much
 
 

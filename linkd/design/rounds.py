@@ -6,11 +6,13 @@ rigid with one of its links (hung on the link's two joints, so the copy is valid
 link's motion) and made the end effector. Its path is a coupler curve of that link's body: on
 half the copies it starts near the old end effector on one of its links, so refinement begins
 close to the best fit so far with the end effector free to move onto a neighbouring body, and
-anywhere about any link on the rest. Designs with no room for a joint more have their joints
-moved at random instead (basin hopping). The designs are pruned first (`prune`): the supports
-of an earlier grown joint that nothing else needs fall out, so growth does not pile up idle
-joints. Only designs that can be built are searched around: a neighbourhood of a design the
-export refuses mostly holds designs it refuses too, which delivery would pass over.
+anywhere about any link on the rest. Many copies are made (a coupler curve is cheap to place
+on the target, dear to refine) and only the best placed are refined. Designs with no room for
+a joint more have their joints moved at random instead (basin hopping). The designs are
+pruned first (`prune`): the supports of an earlier grown joint that nothing else needs fall
+out, so growth does not pile up idle joints. Only designs that can be built are searched
+around: a neighbourhood of a design the export refuses mostly holds designs it refuses too,
+which delivery would pass over.
 """
 
 from __future__ import annotations
