@@ -47,18 +47,19 @@ def around(
     `spread` times 1/4, 1/2 and 1 in turn."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
-    best, seen = [candidates.batch.subset(np.zeros(0, int))], set()  # (none keeps the shape)
+    best, seen = [], set()
     for row in order:
         key = topology_key(candidates.batch, int(row))
         if key in seen:
             continue
         seen.add(key)
-        if len(seen) > MAX_CHECKS * count or len(best) > count:
+        if len(seen) > MAX_CHECKS * count or len(best) == count:
             break
         design = pruned(candidates.batch.subset([int(row)]))
         if buildable(design, 0):
             best.append(design)
-    batch = joined(best).subset(np.repeat(np.arange(len(best) - 1), copies))
+    none = candidates.batch.subset(np.zeros(0, int))  # an empty batch of the same shape
+    batch = joined(best or [none]).subset(np.repeat(np.arange(len(best)), copies))
     rng = np.random.default_rng(seed)
     limit = min(max_joints or batch.valid.shape[1], batch.valid.shape[1])
     room = (batch.valid.sum(1) < limit) & _moving_links(batch).any((1, 2))
