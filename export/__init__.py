@@ -75,12 +75,12 @@ def export_mechanism(
     assembly = assemble(mech)
     sizes, layout = _layered(mech, assembly, options or ExportOptions())
     files: list[Path] = []
-    meshes, wholes = {}, {}
+    meshes, wholes, volumes = {}, {}, {}
     if "stl" in formats:
-        meshes, wholes = _write_meshes(mech, assembly, layout, sizes, out_dir)
+        meshes, wholes, volumes = _write_meshes(mech, assembly, layout, sizes, out_dir)
     files += [Path(path) for path in {*meshes.values(), *wholes.values()}]
     if "mjcf" in formats:
-        _write_model(mech, assembly, layout, sizes, meshes, out_dir)
+        _write_model(mech, assembly, layout, sizes, (meshes, volumes), out_dir)
         files += [Path(MODEL), Path(SCENE)]
     parts = describe_parts(assembly, layout, sizes, wholes, meshes)
     mech.replace(extra={**mech.extra, "layers": layout.count, "parts": parts}).save(
@@ -122,23 +122,24 @@ def _layered(
 
 def _write_meshes(
     mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, out_dir: Path
-) -> tuple[dict, dict]:
+) -> tuple[dict, dict, dict]:
     """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
     convex pieces, which the model collides). Returns the model's mesh name -> relative path,
-    and plate name -> relative path of its whole STL."""
-    from .meshes import bent_mesh, plate_mesh, write_stl
+    plate name -> relative path of its whole STL, and the model's mesh name -> volume (m^3)."""
+    from .meshes import bent_mesh, plate_mesh, volume, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
     size = (sizes.link_width * unit, sizes.hole_diameter * unit, sizes.thickness * unit)
     (out_dir / MESHES).mkdir(exist_ok=True)
-    model, whole = {}, {}
+    model, whole, volumes = {}, {}, {}
     for plate in plates(assembly, layout):
         points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
         if not plate.bends:
-            write_stl(out_dir / whole[plate.name], *plate_mesh(points, *size), plate.name)
-            model[plate.name] = whole[plate.name]
+            mesh = plate_mesh(points, *size)
+            write_stl(out_dir / whole[plate.name], *mesh, plate.name)
+            model[plate.name], volumes[plate.name] = whole[plate.name], volume(*mesh)
             continue
         chain = np.concatenate([points[:1], (np.array(plate.bends) - origins[plate.part]) * unit,
                                 points[1:]])  # fmt: skip
@@ -148,19 +149,22 @@ def _write_meshes(
             model[name] = f"{MESHES}/{name}.stl"
             bar = plate_mesh(chain[k : k + 2], *size, holes=points[[k == 0, k == len(chain) - 2]])
             write_stl(out_dir / model[name], *bar, name)
-    return model, whole
+            volumes[name] = volume(*bar)
+    return model, whole, volumes
 
 
 def _write_model(
-    mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, meshes: dict, out: Path
+    mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, meshes: tuple, out: Path
 ) -> None:
-    """mechanism.xml (compiled once to size the crank servo from the model's own inertia)."""
+    """mechanism.xml (compiled once to size the crank servo from the model's own inertia).
+    meshes: the model's mesh paths and volumes (`_write_meshes`)."""
     import mujoco
 
     path = out / MODEL
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes))
+    paths, volumes = meshes
+    path.write_text(build_mjcf(mech, assembly, layout, sizes, paths, volumes=volumes))
     servo = servo_gains(mujoco.MjModel.from_xml_path(str(path)), mech)
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo))
+    path.write_text(build_mjcf(mech, assembly, layout, sizes, paths, servo, volumes))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
 
 

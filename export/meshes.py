@@ -66,6 +66,12 @@ def _solid(outline, holes: np.ndarray, hole_diameter: float, thickness: float) -
     return np.asarray(mesh.vert_properties[:, :3], dtype=np.float64), np.asarray(mesh.tri_verts)
 
 
+def volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Enclosed volume of a closed, outward-oriented triangle mesh (divergence theorem)."""
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+
 def write_stl(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str = "linkd") -> None:
     """Binary STL with outward unit normals (triangles counter-clockwise seen from outside)."""
     triangles = vertices[faces]

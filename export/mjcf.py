@@ -39,6 +39,8 @@ TIMESTEP = 2.5e-4  # s, the default
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
 MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
+SMALL_MESH = 1e-14  # m^3: MuJoCo refuses a mesh's exact inertia under 1e-15 (mjMINVAL); a plate
+# of a millimetre-sized design below ten times that is weighed by its surface, its mass given
 SITE_RADIUS = 0.15  # of the link width
 LAYER_COLOURS = [(0.55, 0.55, 0.55), (0.85, 0.45, 0.2), (0.2, 0.55, 0.8), (0.35, 0.7, 0.35),
                  (0.8, 0.7, 0.2), (0.6, 0.4, 0.75), (0.3, 0.7, 0.7), (0.8, 0.35, 0.5)]  # fmt: skip
@@ -60,9 +62,11 @@ def _fmt(*values: float) -> str:
 class _Builder:
     """Writes the model's XML tree part by part; lengths converted to metres on the way."""
 
-    def __init__(self, mech, assembly: Assembly, layout: Layout, sizes: Sizes, armature: float):
+    def __init__(self, mech, assembly: Assembly, layout: Layout, sizes: Sizes, armature: float,
+                 small: dict[str, float]):  # fmt: skip
         self.mech, self.assembly, self.layout = mech, assembly, layout
         self.armature = armature
+        self.density, self.small = sizes.density, small
         self.unit = UNITS_IN_METRES[mech.units]
         self.width = sizes.link_width * self.unit
         self.hole = sizes.hole_diameter * self.unit
@@ -121,8 +125,10 @@ class _Builder:
         pieces = [f"{plate.name}_bar{k}" for k in range(len(chain) - 1)] if plate.bends else []
         if plate.name in meshes or (pieces and pieces[0] in meshes):
             for name in pieces or [plate.name]:
-                ET.SubElement(body, "geom", name=name, type="mesh", mesh=name, pos=_fmt(0, 0, z),
-                              rgba=colour)  # fmt: skip
+                geom = ET.SubElement(body, "geom", name=name, type="mesh", mesh=name,
+                                     pos=_fmt(0, 0, z), rgba=colour)  # fmt: skip
+                if name in self.small:  # a shell's density is per area: give its solid mass
+                    geom.set("mass", _fmt(self.density * self.small[name]))
             return
         if plate.bends:
             sides = list(itertools.pairwise(chain))
@@ -177,10 +183,13 @@ def build_mjcf(
     sizes: Sizes,
     meshes: dict[str, str] | None = None,
     servo: Servo = Servo(1.0, 0.1, 0.0),
+    volumes: dict[str, float] | None = None,
 ) -> str:
     """The model as MJCF text. `meshes` maps part names to STL paths relative to the model file;
-    without it the plates are boxes and cylinders."""
-    b = _Builder(mech, assembly, layout, sizes, servo.armature)
+    without it the plates are boxes and cylinders. `volumes` (m^3, by mesh name) finds the
+    meshes too small for MuJoCo's exact inertia: those take a shell inertia and their mass."""
+    small = {name: v for name, v in (volumes or {}).items() if v < SMALL_MESH}
+    b = _Builder(mech, assembly, layout, sizes, servo.armature, small)
     root = ET.Element("mujoco", model="linkd mechanism")
     ET.SubElement(root, "compiler", angle="radian", autolimits="true",
                   boundmass=_fmt(MIN_MASS), boundinertia=_fmt(MIN_INERTIA))  # fmt: skip
@@ -195,7 +204,8 @@ def build_mjcf(
     if meshes:
         asset = ET.SubElement(root, "asset")
         for name, path in meshes.items():
-            ET.SubElement(asset, "mesh", name=name, file=path, inertia="exact")
+            inertia = "shell" if name in small else "exact"
+            ET.SubElement(asset, "mesh", name=name, file=path, inertia=inertia)
     b.bodies_tree(ET.SubElement(root, "worldbody"), meshes or {})
     contact = ET.SubElement(root, "contact")
     for k, pin in enumerate(assembly.pins):

@@ -1,11 +1,11 @@
 """The sizes linkd can build, checked before any work so extremes fail with one clear line.
 
-Exported parts follow a mechanism's own scale (`linkd.export.options`). Below about half a
-millimetre across, MuJoCo refuses the plates' meshes (their volume is under its floor; at 0.3 mm
-some generator mechanisms' plates already are); above about a
-kilometre its solver tolerances no longer close the loops (`linkd verify` fails mobility and
-kinematics at 10 km). A designed mechanism spans its curve and usually several times more, so a
-curve is held to a smaller top size than a mechanism.
+Exported parts follow a mechanism's own scale (`linkd.export.options`). Plates under MuJoCo's
+mesh volume floor are weighed by their surface (`linkd.export.mjcf`), so generator mechanisms
+still verify at 0.3 mm across, but not at 0.1 mm (dynamics and contacts fail): half a millimetre
+keeps a margin. Above about a kilometre its solver tolerances no longer close the loops (`linkd
+verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve and
+usually several times more, so a curve is held to a smaller top size than a mechanism.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from linkd import classic
-from linkd.export import export_mechanism, joint_paths, qpos_at
+from linkd.export import ExportOptions, export_mechanism, joint_paths, qpos_at
 from linkd.export.layers import Layout, assign_layers, sweep
 from linkd.export.mjcf import build_mjcf
 from linkd.export.options import resolve_sizes
@@ -45,11 +45,14 @@ def _generated(count: int = 3) -> list[Mechanism]:
 
 def _cases() -> dict:
     names = ("jansen_leg", "crank_rocker", "watt_six_bar", "stephenson_six_bar")
-    cases = {name: (Mechanism.load(EXAMPLES / f"{name}.json"), {"mjcf", "stl"}) for name in names}
-    cases["jansen_primitives"] = (cases["jansen_leg"][0], {"mjcf"})
-    cases["millimetre_crank_rocker"] = (classic.crank_rocker(), {"mjcf", "stl"})  # 1 mm crank
+    both = {"mjcf", "stl"}
+    cases = {name: (Mechanism.load(EXAMPLES / f"{name}.json"), both, None) for name in names}
+    cases["jansen_primitives"] = (cases["jansen_leg"][0], {"mjcf"}, None)
+    cases["millimetre_crank_rocker"] = (classic.crank_rocker(), both, None)  # 1 mm crank
+    # plates 1.5 um wide: meshes under MuJoCo's volume floor for an exact inertia
+    cases["thin_plates"] = (classic.crank_rocker(), both, ExportOptions(link_width=0.0015))
     for k, mech in enumerate(_generated()):
-        cases[f"generated_{k}"] = (mech, {"mjcf", "stl"})
+        cases[f"generated_{k}"] = (mech, both, None)
     return cases
 
 
@@ -58,9 +61,9 @@ CASES = _cases()
 
 @pytest.fixture(scope="module", params=sorted(CASES))
 def exported(request, tmp_path_factory):
-    mech, formats = CASES[request.param]
+    mech, formats, options = CASES[request.param]
     out = tmp_path_factory.mktemp(request.param)
-    export_mechanism(mech, out, formats)
+    export_mechanism(mech, out, formats, options)
     with capture_warnings() as messages:
         model = mujoco.MjModel.from_xml_path(str(out / "mechanism.xml"))
     return mech, model, messages, out
@@ -183,3 +186,18 @@ def test_planted_defects_are_caught(tmp_path):
     qpos = qpos_at(model, mech, np.array([1.0]))[0]
     _, jacobian = loop_closure(model, mujoco.MjData(model), qpos)
     assert model.nv - np.linalg.matrix_rank(jacobian, 1e-9 * np.abs(jacobian).max()) == 3
+
+
+def test_plates_under_the_mesh_volume_floor_keep_their_solid_mass(tmp_path):
+    """MuJoCo refuses an exact inertia for a mesh under 1e-15 m^3: such plates (a 1.5 um wide
+    crank) take a shell inertia and the mass of their solid, so the model still compiles."""
+    import trimesh
+
+    options = ExportOptions(link_width=0.0015, density=1e7)  # dense, to clear MuJoCo's mass floor
+    export_mechanism(classic.crank_rocker(), tmp_path, {"mjcf", "stl"}, options)
+    text = (tmp_path / "mechanism.xml").read_text()
+    assert '<mesh name="link_0_1" file="meshes/link_0_1.stl" inertia="shell" />' in text
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "mechanism.xml"))
+    volume = trimesh.load(tmp_path / "meshes" / "link_0_1.stl").volume
+    assert 0 < volume < mujoco.mjMINVAL
+    assert model.body("link_0_1").mass[0] == pytest.approx(1e7 * volume, rel=1e-6)
