@@ -8,7 +8,7 @@ from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design.propose import Candidates
 from linkd.design.rounds import around, with_coupler_point
-from linkd.design.search import _buildable, search_width
+from linkd.design.search import _buildable, around_width, search_width
 from linkd.design.select import topology_key
 from linkd.export import buildable
 from linkd.mechanism import Mechanism
@@ -99,3 +99,5 @@ def test_a_longer_budget_searches_wider_unless_told():
     # An open or timed stroke has one round and refines three times as many designs in it.
     assert search_width(30, None, None, stroke=True) == (1, 1024, 144)
     assert search_width(30, 3, None, 20, stroke=True) == (1, 1024, 20)
+    assert around_width(30, None) == 4 and around_width(120, None) == 16
+    assert around_width(120, 2) == 2

@@ -89,7 +89,8 @@ class DesignOptions:
     smooth: float = 0.0  # Gaussian filter of the drawn curve, fraction of its length (drawn.py)
     rounds: int | None = None  # refinement rounds, each after the first growing the best so
     # far by a joint (None: from the budget)
-    around: int = 4  # designs (of distinct topologies) searched around
+    around: int | None = None  # designs (of distinct topologies) searched around in a round
+    # (None: 4 for each 30 s of the budget: longer budgets search around more basins)
     around_copies: int = 128  # copies of each, grown by a joint (rounds.py), all placed on the
     # target and only the best refined: placing a copy costs a fraction of refining it
     around_spread: float = 0.1  # joints of copies with no room to grow move by this much

@@ -54,6 +54,7 @@ if TYPE_CHECKING:
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 ROUND_ITERATIONS = 100  # L-BFGS iterations of a later round's copies in the default budget
 ROUND_ORDERED_ITERATIONS = 40  # of which the first, every copy, at the coarse angles
+AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 
 
 class NoDesign(Exception):
@@ -70,7 +71,8 @@ def search_width(
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
     not given: three rounds, 1024 paths and 48 designs for the default 30 s; for every further
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
-    same few designs do not) and up to eight rounds more, as many as the budget's deadline
+    same few designs do not; each round also searches around more designs, `around_width`)
+    and up to eight rounds more, as many as the budget's deadline
     leaves time for. The deadline also stops refinement early on a slow or busy machine.
     An open or timed `stroke` has one round (searching around the best works on closed loops)
     and spends the later rounds' time on refining three times as many designs in it."""
@@ -79,6 +81,12 @@ def search_width(
     count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
     rounds = 1 if stroke else (rounds or 3 + more)
     return rounds, atlas_paths or 1024 * steps, count
+
+
+def around_width(time_budget: float, around: int | None) -> int:
+    """Designs each later round searches around, where not given: AROUND for each 30 s of the
+    budget (a longer budget's many rounds reach more basins from more starts: 120 s, 16)."""
+    return around or AROUND * budget_steps(time_budget)
 
 
 def budget_steps(time_budget: float) -> int:
@@ -96,6 +104,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
                                                      o.refine_count, stroke)  # fmt: skip
     report["rounds"], report["refine_count"] = rounds, refine_count
+    around_count = around_width(o.time_budget, o.around)
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         report["proposer"] = o.proposer
         if proposer is None and o.proposer == "random":
@@ -172,7 +181,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
             if time.monotonic() > deadline:
                 break
             with stages.stage("round", "growing the best designs by a joint") as note:
-                nearby = around(candidates, o.around, o.around_copies, o.around_spread,
+                nearby = around(candidates, around_count, o.around_copies, o.around_spread,
                                 o.seed + len(candidates), buildable, inner.max_joints)  # fmt: skip
                 if len(nearby) == 0:
                     note("no design that can be built to search around")
