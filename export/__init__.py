@@ -80,7 +80,7 @@ def export_mechanism(
         meshes, wholes, volumes = _write_meshes(mech, assembly, layout, sizes, out_dir)
     files += [Path(path) for path in {*meshes.values(), *wholes.values()}]
     if "mjcf" in formats:
-        _write_model(mech, assembly, layout, sizes, (meshes, volumes), out_dir)
+        _write_model(mech, assembly, layout, sizes, meshes, volumes, out_dir)
         files += [Path(MODEL), Path(SCENE)]
     parts = describe_parts(assembly, layout, sizes, wholes, meshes)
     mech.replace(extra={**mech.extra, "layers": layout.count, "parts": parts}).save(
@@ -154,17 +154,22 @@ def _write_meshes(
 
 
 def _write_model(
-    mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, meshes: tuple, out: Path
+    mech: Mechanism,
+    assembly: Assembly,
+    layout: Layout,
+    sizes: Sizes,
+    meshes: dict,
+    volumes: dict,
+    out: Path,
 ) -> None:
-    """mechanism.xml (compiled once to size the crank servo from the model's own inertia).
-    meshes: the model's mesh paths and volumes (`_write_meshes`)."""
+    """mechanism.xml (compiled once to size the crank servo from the model's own inertia), with
+    the model's mesh paths and volumes from `_write_meshes`."""
     import mujoco
 
     path = out / MODEL
-    paths, volumes = meshes
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, paths, volumes=volumes))
+    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, volumes=volumes))
     servo = servo_gains(mujoco.MjModel.from_xml_path(str(path)), mech)
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, paths, servo, volumes))
+    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo, volumes))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
 
 

@@ -3,9 +3,9 @@
 Exported parts follow a mechanism's own scale (`linkd.export.options`). Plates under MuJoCo's
 mesh volume floor are weighed by their surface (`linkd.export.mjcf`), so generator mechanisms
 still verify at 0.3 mm across, but not at 0.1 mm (dynamics and contacts fail): half a millimetre
-keeps a margin. Above about a kilometre its solver tolerances no longer close the loops (`linkd
-verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve and
-usually several times more, so a curve is held to a smaller top size than a mechanism.
+keeps a margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
+(`linkd verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve
+and usually several times more, so a curve is held to a smaller top size than a mechanism.
 """
 
 from __future__ import annotations

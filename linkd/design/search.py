@@ -72,10 +72,10 @@ def search_width(
     not given: three rounds, 1024 paths and 48 designs for the default 30 s; for every further
     30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
     same few designs do not; each round also searches around more designs, `around_width`)
-    and up to eight rounds more, as many as the budget's deadline
-    leaves time for. The deadline also stops refinement early on a slow or busy machine.
-    An open or timed `stroke` has one round (searching around the best works on closed loops)
-    and spends the later rounds' time on refining three times as many designs in it."""
+    and up to eight rounds more, as many as the budget's deadline leaves time for. The deadline
+    also stops refinement early on a slow or busy machine. An open or timed `stroke` has one
+    round (searching around the best works on closed loops) and spends the later rounds' time
+    on refining three times as many designs in it."""
     steps = budget_steps(time_budget)
     more = 8 * (steps - 1)
     count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
