@@ -126,7 +126,7 @@ def _write_meshes(
     """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
     convex pieces, which the model collides). Returns the model's mesh name -> relative path,
     plate name -> relative path of its whole STL, and the model's mesh name -> volume (m^3)."""
-    from .meshes import bent_mesh, plate_mesh, volume, write_stl
+    from .meshes import bent_mesh, plate_mesh, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
@@ -137,19 +137,19 @@ def _write_meshes(
         points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
         if not plate.bends:
-            mesh = plate_mesh(points, *size)
-            write_stl(out_dir / whole[plate.name], *mesh, plate.name)
-            model[plate.name], volumes[plate.name] = whole[plate.name], volume(*mesh)
+            solid = plate_mesh(points, *size)
+            write_stl(out_dir / whole[plate.name], solid, plate.name)
+            model[plate.name], volumes[plate.name] = whole[plate.name], solid.volume
             continue
         chain = np.concatenate([points[:1], (np.array(plate.bends) - origins[plate.part]) * unit,
                                 points[1:]])  # fmt: skip
-        write_stl(out_dir / whole[plate.name], *bent_mesh(chain, *size), plate.name)
+        write_stl(out_dir / whole[plate.name], bent_mesh(chain, *size), plate.name)
         for k in range(len(chain) - 1):
             name = f"{plate.name}_bar{k}"
             model[name] = f"{MESHES}/{name}.stl"
             bar = plate_mesh(chain[k : k + 2], *size, holes=points[[k == 0, k == len(chain) - 2]])
-            write_stl(out_dir / model[name], *bar, name)
-            volumes[name] = volume(*bar)
+            write_stl(out_dir / model[name], bar, name)
+            volumes[name] = bar.volume
     return model, whole, volumes
 
 

@@ -11,11 +11,21 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 SEGMENTS = 48  # polygon sides of a full circle
 STL_RECORD = np.dtype([("normal", "<f4", 3), ("vertices", "<f4", (3, 3)), ("attribute", "<u2")])
+
+
+class Solid(NamedTuple):
+    """A closed triangle mesh: vertices (V, 3), triangles (F, 3), and its volume (as manifold3d
+    measured it; the model needs it where MuJoCo's own is under its floor)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    volume: float
 
 
 def plate_mesh(
@@ -24,18 +34,16 @@ def plate_mesh(
     hole_diameter: float,
     thickness: float,
     holes: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (V, 3) and triangles (F, 3) of a plate through `points` (k, 2), z in [0, t],
-    with pin holes at `holes` (all the points by default)."""
+) -> Solid:
+    """A plate through `points` (k, 2), z in [0, t], with pin holes at `holes` (all the points
+    by default)."""
     import manifold3d
 
     outline = manifold3d.CrossSection.batch_hull(_discs(points, width / 2))
     return _solid(outline, points if holes is None else holes, hole_diameter, thickness)
 
 
-def bent_mesh(
-    chain: np.ndarray, width: float, hole_diameter: float, thickness: float
-) -> tuple[np.ndarray, np.ndarray]:
+def bent_mesh(chain: np.ndarray, width: float, hole_diameter: float, thickness: float) -> Solid:
     """A bent link through the points of `chain` (k, 2): one bar (the hull of two discs) per
     pair of neighbours, joined, with pin holes at the two ends; z in [0, t]."""
     import manifold3d
@@ -53,33 +61,29 @@ def _discs(points: np.ndarray, radius: float) -> list:
     return [circle.translate((float(x), float(y))) for x, y in points]
 
 
-def _solid(outline, holes: np.ndarray, hole_diameter: float, thickness: float) -> tuple:
-    """The outline minus holes at `holes`, extruded to `thickness`, as vertices and triangles."""
+def _solid(outline, holes: np.ndarray, hole_diameter: float, thickness: float) -> Solid:
+    """The outline minus holes at `holes`, extruded to `thickness`."""
     import manifold3d
 
     for disc in _discs(holes, hole_diameter / 2):
         outline = outline - disc
     solid = outline.extrude(thickness)
-    if solid.status() != manifold3d.Error.NoError or not solid.volume() > 0:
+    volume = float(solid.volume())
+    if solid.status() != manifold3d.Error.NoError or not volume > 0:
         raise ValueError("the plate is not a closed solid (are its holes wider than the plate?)")
     mesh = solid.to_mesh()
-    return np.asarray(mesh.vert_properties[:, :3], dtype=np.float64), np.asarray(mesh.tri_verts)
+    vertices = np.asarray(mesh.vert_properties[:, :3], dtype=np.float64)
+    return Solid(vertices, np.asarray(mesh.tri_verts), volume)
 
 
-def volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Enclosed volume of a closed, outward-oriented triangle mesh (divergence theorem)."""
-    a, b, c = (vertices[faces[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
-
-
-def write_stl(path: Path, vertices: np.ndarray, faces: np.ndarray, name: str = "linkd") -> None:
+def write_stl(path: Path, solid: Solid, name: str = "linkd") -> None:
     """Binary STL with outward unit normals (triangles counter-clockwise seen from outside)."""
-    triangles = vertices[faces]
+    triangles = solid.vertices[solid.faces]
     normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
     normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    records = np.zeros(len(faces), dtype=STL_RECORD)
+    records = np.zeros(len(solid.faces), dtype=STL_RECORD)
     records["normal"], records["vertices"] = normals, triangles
     header = name.encode("ascii", "replace")[:80].ljust(80, b" ")
     with open(path, "wb") as handle:
-        handle.write(header + np.uint32(len(faces)).tobytes())
+        handle.write(header + np.uint32(len(solid.faces)).tobytes())
         handle.write(records.tobytes())
