@@ -177,6 +177,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "seconds": seconds,
         "found_by": outcome.report["search"].get("found_by"),
         "sources": outcome.report["search"].get("sources", {}),
+        "polish": outcome.report["search"].get("polish", {}),
         "skipped": dict(outcome.report["search"].get("skipped", {})),
         "timings": dict(outcome.report.get("timings", {})),
     }
@@ -255,8 +256,9 @@ def _held(rows: list[dict]) -> dict:
 def stages(rows: list[dict]) -> dict:
     """Mean over the curves of the best error each stage reached (normalised frame, the
     refinement's own measure): placed candidates from the proposer, from the proposer and the
-    atlas, then refined, then after the later rounds. A curve without a figure for a stage
-    (the source offered nothing) counts with the stage before."""
+    atlas, then refined, after the later rounds, and after the polish at finer crank angles. A
+    curve without a figure for a stage (the source offered nothing) counts with the stage
+    before."""
     columns: dict[str, list[float]] = {}
     for row in rows:
         sources = row.get("sources") or {}
@@ -272,6 +274,7 @@ def stages(rows: list[dict]) -> dict:
         refined = [sources.get(name, {}).get("best_refined") for name in ("model", "atlas")]
         reached("+ refinement", min((v for v in refined if v is not None), default=None))
         reached("+ later rounds", sources.get("round 2", {}).get("best_refined"))
+        reached("+ polish", (row.get("polish") or {}).get("after"))
     return {name: float(np.mean(v)) for name, v in columns.items() if np.isfinite(v).all()}
 
 
