@@ -3,7 +3,8 @@
 Candidates come from the proposer (LinkD, or the curve-blind generator) and from the atlas of
 precomputed mechanisms; each valid one offers its sub-mechanisms, is placed on the target by
 its best similarity (or, on an open or timed target, its best sub-arc of crank angles too),
-and the best few are refined, in rounds that grow the best so far by a joint on closed loops.
+and the best few are refined, in rounds that grow the best so far by a joint on closed loops;
+on those, the best are refined once more at the end, their paths traced more finely.
 The designer's constraints (in the target's normalised frame) prune, pin, rank and bound the
 candidates throughout.
 """
