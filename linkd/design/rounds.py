@@ -58,8 +58,9 @@ def around(
         design = pruned(candidates.batch.subset([int(row)]))
         if buildable(design, 0):
             best.append(design)
-    none = candidates.batch.subset(np.zeros(0, int))  # an empty batch of the same shape
-    batch = joined(best or [none]).subset(np.repeat(np.arange(len(best)), copies))
+    if not best:
+        return candidates.batch.subset(np.zeros(0, int))
+    batch = joined(best).subset(np.repeat(np.arange(len(best)), copies))
     rng = np.random.default_rng(seed)
     limit = min(max_joints or batch.valid.shape[1], batch.valid.shape[1])
     room = (batch.valid.sum(1) < limit) & _moving_links(batch).any((1, 2))
