@@ -1,16 +1,20 @@
 """The last refinement of the best designs, at finer crank angles (linkd.design.search._polish)."""
 
+import time
 from dataclasses import replace
 
 import numpy as np
+from test_design import QUICK, pool_proposer
 from test_refine import _perturbed
 
 from linkd import classic
 from linkd.constraints import Constraints
+from linkd.design.pipeline import DesignOptions
 from linkd.design.propose import Candidates
 from linkd.design.refine import RefineSettings, refine
-from linkd.design.search import _polish, _refiner
+from linkd.design.search import POLISH_SHARE, _polish, _refiner, search
 from linkd.design.select import curve_error, end_effector_path, to_mechanism
+from linkd.design.stages import Stages
 from linkd.design.stroke import Goal
 from linkd.geometry import Similarity
 
@@ -76,3 +80,19 @@ def test_a_design_outside_the_hard_limits_at_finer_angles_keeps_its_place():
     assert done["designs"] == 3 and done["after"] == done["before"]
     np.testing.assert_array_equal(candidates.batch.positions, old)
     np.testing.assert_array_equal(candidates.chamfer, errors)
+
+
+def test_the_rounds_leave_the_last_share_of_the_budget_to_the_polish(pool):
+    """A long budget's rounds would run to the deadline; a search already within the polish's
+    share of its budget skips them (and the first refinement) and still polishes."""
+    target = end_effector_path(classic.crank_rocker(), 200)[0]
+    target = (target - target.mean(0)) / np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+    options = DesignOptions(candidates=12, time_budget=60, refine_settings=QUICK, atlas=False,
+                            rounds=3)  # fmt: skip
+    stages, report = Stages(False), {}
+    deadline = time.monotonic() + 0.5 * POLISH_SHARE * options.time_budget
+    search(Goal(target, True, False), Constraints(), options, pool_proposer(pool), stages,
+           deadline, report)  # fmt: skip
+    assert report["refine_iterations"] == 0 and "round" not in stages.seconds
+    assert report["polish"]["designs"] > 0
+    assert time.monotonic() < deadline + 2.0  # the polish stops at the deadline

@@ -206,7 +206,8 @@ def _deliver(
             if failed.get(key, 0) >= FAILURES_PER_TOPOLOGY:
                 continue
             tried += 1
-            mech, measured = _checked(batch, int(row), frame, o, _range(candidates, row))
+            candidate = pruned(batch.subset([int(row)]))
+            mech, measured = _checked(candidate, frame, o, _range(candidates, row))
             if mech is None:  # within the screening's sampling, but not exactly
                 unmet.append(next(m for m in measured if not m.holds))
             else:
@@ -233,11 +234,11 @@ def _deliver(
     return found, alternatives, measured
 
 
-def _checked(batch: LinkageBatch, row: int, frame, o: DesignOptions, crank_range=None) -> tuple:
-    """The candidate `row`, pruned of joints its end effector does not need (`prune`), in the
-    user's frame and units, its crank pivot exactly on the motor point if one was given, and
-    each constraint measured on it; no mechanism (None) when one of them does not hold."""
-    mech = to_mechanism(pruned(batch.subset([row])), 0, frame, o.units, crank_range)
+def _checked(candidate: LinkageBatch, frame, o: DesignOptions, crank_range=None) -> tuple:
+    """A candidate (its one row, pruned of joints its end effector does not need) in
+    the user's frame and units, its crank pivot exactly on the motor point if one was given,
+    and each constraint measured on it; no mechanism (None) when one of them does not hold."""
+    mech = to_mechanism(candidate, 0, frame, o.units, crank_range)
     c = o.constraints
     if not c:
         return mech, []
@@ -253,18 +254,19 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
     """Up to `o.top` verified designs of topologies other than the chosen one (as delivered,
     pruned), best first."""
     batch = candidates.batch
-    seen = {_pruned_key(batch, chosen)}
-    rows = []
+    seen = {topology_key(pruned(batch.subset([chosen])), 0)}
+    kept = {}  # row -> the candidate as delivery exports it, pruned
     for row in map(int, order):
-        key = _pruned_key(batch, row)
+        candidate = pruned(batch.subset([row]))
+        key = topology_key(candidate, 0)
         if key not in seen:
             seen.add(key)
-            rows.append(row)
-            if len(rows) == o.attempts * o.top:
+            kept[row] = candidate
+            if len(kept) == o.attempts * o.top:
                 break
     listed: list[dict] = []
-    for row in rows:
-        mech, measured = _checked(batch, row, frame, o, _range(candidates, row))
+    for row, candidate in kept.items():
+        mech, measured = _checked(candidate, frame, o, _range(candidates, row))
         if mech is None:
             continue
         folder = stage / "alternatives" / str(len(listed) + 1)
@@ -283,11 +285,6 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if folder.exists() and not any(folder.iterdir()):
             folder.rmdir()
     return listed
-
-
-def _pruned_key(batch: LinkageBatch, row: int) -> bytes:
-    """The topology of a candidate as delivery exports it: pruned."""
-    return topology_key(pruned(batch.subset([row])), 0)
 
 
 def _range(candidates: Candidates, row: int) -> tuple[float, float] | None:

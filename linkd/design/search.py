@@ -59,6 +59,8 @@ AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 POLISH = 8  # best designs refined again at the end at finer angles, for each 30 s of the budget
 POLISH_ANGLES = 1024
 POLISH_ITERATIONS = 100
+POLISH_SHARE = 0.1  # of the budget kept from the rounds for the polish (a long budget's rounds
+# would run to the deadline and leave it none)
 
 
 class NoDesign(Exception):
@@ -160,9 +162,11 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     placed = candidates.chamfer.copy()
     candidates.chamfer = candidates.chamfer.copy()
     report["refined"] = 0
+    polishing = o.refine and not stroke
+    settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
+    rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
     if o.refine:
-        settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-        refine_rows = _refiner(goal, target, stroke, settings, inner, deadline)
+        refine_rows = _refiner(goal, target, stroke, settings, inner, rounds_end)
         with stages.stage("refine", "refining the best designs") as note:
             rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
                                          refine_count, o.per_topology), int)  # fmt: skip
@@ -179,10 +183,10 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                                       iterations=min(settings.iterations, ROUND_ITERATIONS),
                                       ordered_iterations=min(settings.ordered_iterations,
                                                              ROUND_ORDERED_ITERATIONS))  # fmt: skip
-        refine_nearby = _refiner(goal, target, stroke, nearby_settings, inner, deadline)
+        refine_nearby = _refiner(goal, target, stroke, nearby_settings, inner, rounds_end)
         buildable = _buildable()
         for _ in range(rounds - 1):
-            if time.monotonic() > deadline:
+            if time.monotonic() > rounds_end:
                 break
             with stages.stage("round", "growing the best designs by a joint") as note:
                 nearby = around(candidates, around_count, o.around_copies, o.around_spread,
@@ -207,7 +211,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         candidates.ranges = None
     used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
     report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
-    if o.refine and not stroke and time.monotonic() < deadline:
+    if polishing and time.monotonic() < deadline:
         with stages.stage("polish", "refining the best designs at finer crank angles") as note:
             count = POLISH * budget_steps(o.time_budget)
             polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
