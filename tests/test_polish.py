@@ -4,6 +4,7 @@ import time
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from test_design import QUICK, pool_proposer
 from test_refine import _perturbed
 
@@ -96,3 +97,21 @@ def test_the_rounds_leave_the_last_share_of_the_budget_to_the_polish(pool):
     assert report["refine_iterations"] == 0 and "round" not in stages.seconds
     assert report["polish"]["designs"] > 0
     assert time.monotonic() < deadline + 2.0  # the polish stops at the deadline
+
+
+def test_a_drawn_loop_is_polished_against_its_finely_read_curve(pool):
+    """The polish measures a drawn loop against `Goal.fine` (its user's points read at more
+    points), the rest of the search against the 200-point target: with the fine curve moved
+    aside, the polished designs' errors are those against it."""
+    target = end_effector_path(classic.crank_rocker(), 200)[0]
+    target = (target - target.mean(0)) / np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+    aside = target + np.array([0.3, 0.0])
+    options = DesignOptions(candidates=12, refine_settings=QUICK, atlas=False, rounds=1)
+    report = {}
+    found = search(Goal(target, True, False, fine=aside), Constraints(), options,
+                   pool_proposer(pool), Stages(False), time.monotonic() + 60, report)  # fmt: skip
+    assert report["polish"]["designs"] > 0
+    best = found.batch.subset([int(np.argmin(found.chamfer))])
+    finely = replace(FINE, iterations=0, ordered_iterations=0)
+    assert np.min(found.chamfer) == pytest.approx(refine(best, aside, finely).chamfer[0], rel=1e-4)
+    assert refine(best, target, finely).chamfer[0] > np.min(found.chamfer) + 0.05

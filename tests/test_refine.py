@@ -9,7 +9,9 @@ from linkd.batch import LinkageBatch
 from linkd.curves import chamfer, normalise, ordered_distance_batch, resample
 from linkd.design.lbfgs import minimise
 from linkd.design.refine import (
+    KD_PAIRS,
     RefineSettings,
+    nearest_vertices,
     ordered_distance,
     polyline_chamfer,
     refine,
@@ -54,6 +56,26 @@ def test_polyline_chamfer_ignores_sampling_density():
     moved = torch.as_tensor(ellipse(300) + np.array([0.05, 0.0]))[None]
     dense = chamfer(resample(moved[0].numpy(), 4000), resample(target.numpy(), 4000))
     assert polyline_chamfer(moved, target).item() == pytest.approx(dense, rel=0.02)
+
+
+@pytest.mark.parametrize("points", [(64, 100), (1024, 2000)])  # all pairs at once; k-d trees
+def test_nearest_vertices_are_the_nearest_both_ways(points):
+    t, m = points
+    assert (t * m < KD_PAIRS) == (points == (64, 100))
+    rng = np.random.default_rng(0)
+    paths = torch.as_tensor(np.stack([ellipse(t) * rng.uniform(0.5, 2) + rng.normal(0, 0.5, 2)
+                                      for _ in range(3)]))  # fmt: skip
+    paths[1, 5] = torch.nan  # a locked pose: its distances stay NaN, the others are unaffected
+    target = torch.as_tensor(ellipse(m) + rng.normal(0, 0.01, (m, 2)))
+    near_target, near_path = nearest_vertices(paths, target)
+    d = torch.cdist(paths, target[None].expand(3, -1, -1))  # (3, T, M)
+    finite = torch.isfinite(paths).all(-1)
+    picked = d.gather(2, near_target[..., None])[..., 0]
+    assert torch.allclose(picked[finite], d.amin(2)[finite])
+    clean = [0, 2]
+    picked = d[clean].gather(1, near_path[clean][:, None])[:, 0]
+    assert torch.allclose(picked, d[clean].amin(1))
+    assert near_path.min() >= 0 and near_path.max() < t
 
 
 def test_ordered_distance_finds_shift_and_direction():

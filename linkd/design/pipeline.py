@@ -46,7 +46,7 @@ from .output import SKIP_REASONS, Delivered, deliver, finish, summary
 from .propose import SOURCES, Candidates, Proposer
 from .prune import pruned
 from .refine import RefineSettings, single_thread
-from .search import N_POINTS, NoDesign, search
+from .search import FINE_POINTS, N_POINTS, NoDesign, search
 from .select import to_mechanism, topology_key
 from .stages import Stages
 from .stroke import Goal, make_goal
@@ -126,7 +126,8 @@ def design(
         goal, frame = make_goal(points, closed, o.timed, N_POINTS)
         if closed and not o.timed:  # a drawn loop, read as drawn.py says
             target, frame = normalise(read_target(points, N_POINTS, o.smooth))
-            goal = Goal(target, True, False)
+            fine = frame.inverse().apply(read_target(points, FINE_POINTS, o.smooth))
+            goal = Goal(target, True, False, fine)
         kind = ("closed" if closed else "open") + (", timed" if o.timed else "")
         note(f"{len(points)} points from {Path(curve_path).name}, {kind} path")
     report_search: dict = {"strategy": o.strategy, "seed": o.seed, "candidates": o.candidates}

@@ -27,12 +27,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 
 from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints
 from linkd.design.lbfgs import minimise
 from linkd.kinematics import trace
 from linkd.topology import Plan, assembly_plan
+
+KD_PAIRS = 2**18  # path points x target points from which nearest vertices come from k-d trees
 
 
 @dataclass(frozen=True)
@@ -273,17 +276,38 @@ def polyline_chamfer(path: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     Each direction is the mean distance from a curve's points to the other polyline, the path's
     points weighted by the arc length around them (so uneven crank speed does not bias it).
     """
+    with torch.no_grad():
+        near_target, near_path = nearest_vertices(path.detach(), target)
     target = target[None].expand(len(path), -1, -1)
-    with torch.no_grad():  # nearest vertices both ways, from |p|^2 - 2 p.q + |q|^2
-        cross = torch.bmm(path, target.transpose(1, 2)).mul_(-2)  # (B, T, M)
-        near_target = (cross + (target[0] ** 2).sum(1)).argmin(2)
-        near_path = cross.add_((path**2).sum(2)[:, :, None]).min(1).indices
     to_path = point_to_polyline(target, path, near_path).mean(1)
     segment = (torch.roll(path, -1, 1) - path).norm(dim=-1).detach()
     weight = 0.5 * (segment + torch.roll(segment, 1, 1))
     weight = weight / weight.sum(1, keepdim=True).clamp_min(1e-12)
     to_target = (point_to_polyline(path, target, near_target) * weight).sum(1)
     return to_path + to_target
+
+
+def nearest_vertices(path: torch.Tensor, target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The nearest target vertex (B, T) of each path point and the nearest path vertex (B, M) of
+    each target point, for paths (B, T, 2) and a target (M, 2). Small problems compare every
+    pair at once (from |p|^2 - 2 p.q + |q|^2); past KD_PAIRS pairs a path, k-d trees are faster
+    (a finely traced path against a finely read target: five times at 1024 by 1000)."""
+    b, t, _ = path.shape
+    if t * len(target) < KD_PAIRS:
+        target = target[None].expand(b, -1, -1)
+        cross = torch.bmm(path, target.transpose(1, 2)).mul_(-2)  # (B, T, M)
+        near_target = (cross + (target[0] ** 2).sum(1)).argmin(2)
+        return near_target, cross.add_((path**2).sum(2)[:, :, None]).min(1).indices
+    # A locked pose's NaN points get some vertex; their distances stay NaN.
+    p, q = np.nan_to_num(path.double().numpy()), target.double().numpy()
+    near_target = cKDTree(q).query(p.reshape(-1, 2))[1].reshape(b, t)
+    # One tree for every path: each moved along x by its own multiple of a span wider than all
+    # of them together, so a target point moved likewise finds its nearest in its own path.
+    span = 4 * max(np.abs(p).max(), np.abs(q).max()) + 1
+    shift = np.stack([np.arange(b) * span, np.zeros(b)], 1)[:, None]  # (B, 1, 2)
+    near_path = cKDTree((p + shift).reshape(-1, 2)).query((q + shift).reshape(-1, 2))[1]
+    near_path = near_path.reshape(b, -1) - t * np.arange(b)[:, None]
+    return torch.as_tensor(near_target), torch.as_tensor(near_path)
 
 
 def point_to_polyline(

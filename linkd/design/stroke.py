@@ -41,11 +41,13 @@ CHUNK = 128  # candidates searched at a time
 @dataclass(frozen=True)
 class Goal:
     """A target in its normalised frame: `points` (M, 2) equally spaced by arc length (or, when
-    timed, in time), `closed` or open, `timed` or not."""
+    timed, in time), `closed` or open, `timed` or not; a drawn loop also `fine`: the same curve
+    read at more points, for the last refinement (`search._polish`)."""
 
     points: np.ndarray
     closed: bool
     timed: bool
+    fine: np.ndarray | None = None
 
     def samples(self, count: int) -> np.ndarray:
         """(count, 2) points of the target in the same kind of spacing."""
