@@ -291,7 +291,8 @@ def nearest_vertices(path: torch.Tensor, target: torch.Tensor) -> tuple[torch.Te
     """The nearest target vertex (B, T) of each path point and the nearest path vertex (B, M) of
     each target point, for paths (B, T, 2) and a target (M, 2). Small problems compare every
     pair at once (from |p|^2 - 2 p.q + |q|^2); past KD_PAIRS pairs a path, k-d trees are faster
-    (a finely traced path against a finely read target: five times at 1024 by 1000)."""
+    (the polish's 1024 path points against 1000 target points: the whole Chamfer distance, with
+    its gradient, three times)."""
     b, t, _ = path.shape
     if t * len(target) < KD_PAIRS:
         target = target[None].expand(b, -1, -1)
