@@ -83,11 +83,16 @@ def test_a_design_outside_the_hard_limits_at_finer_angles_keeps_its_place():
     np.testing.assert_array_equal(candidates.chamfer, errors)
 
 
+def _unit_crank_rocker() -> np.ndarray:
+    """A crank-rocker's coupler curve, 200 points, centred and scaled to unit RMS radius."""
+    target = end_effector_path(classic.crank_rocker(), 200)[0]
+    return (target - target.mean(0)) / np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+
+
 def test_the_rounds_leave_the_last_share_of_the_budget_to_the_polish(pool):
     """A long budget's rounds would run to the deadline; a search already within the polish's
     share of its budget skips them (and the first refinement) and still polishes."""
-    target = end_effector_path(classic.crank_rocker(), 200)[0]
-    target = (target - target.mean(0)) / np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+    target = _unit_crank_rocker()
     options = DesignOptions(candidates=12, time_budget=60, refine_settings=QUICK, atlas=False,
                             rounds=3)  # fmt: skip
     stages, report = Stages(False), {}
@@ -103,8 +108,7 @@ def test_a_drawn_loop_is_polished_against_its_finely_read_curve(pool):
     """The polish measures a drawn loop against `Goal.fine` (its user's points read at more
     points), the rest of the search against the 200-point target: with the fine curve moved
     aside, the polished designs' errors are those against it."""
-    target = end_effector_path(classic.crank_rocker(), 200)[0]
-    target = (target - target.mean(0)) / np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+    target = _unit_crank_rocker()
     aside = target + np.array([0.3, 0.0])
     options = DesignOptions(candidates=12, refine_settings=QUICK, atlas=False, rounds=1)
     report = {}
