@@ -7,7 +7,7 @@ from test_export_narrow import KNOTTED, SNARLED, TANGLED
 from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design.propose import Candidates
-from linkd.design.rounds import around, with_coupler_point
+from linkd.design.rounds import DYAD_SLACK, around, with_coupler_point, with_dyad
 from linkd.design.search import _buildable, around_width, search_width
 from linkd.design.select import topology_key
 from linkd.export import buildable
@@ -42,8 +42,8 @@ def test_rounds_pass_over_a_better_design_that_cannot_be_built():
     assert len(nearby) == 3
     plain = batch.subset(np.array([1]))
     n = int(plain.valid.sum())
-    for row in range(len(nearby)):  # the crank-rocker, grown by a joint
-        assert nearby.valid[row].sum() == n + 1
+    for row in range(len(nearby)):  # the crank-rocker, grown by a joint or a dyad
+        assert nearby.valid[row].sum() in (n + 1, n + 2)
         assert (nearby.adjacency[row, :n, :n] == plain.adjacency[0, :n, :n]).all()
         assert np.allclose(nearby.positions[row, :n], plain.positions[0, :n])
     # Without the check, the refused design's neighbourhood is searched first.
@@ -73,6 +73,39 @@ def test_a_grown_joint_is_a_coupler_point_and_the_end_effector():
     # Half start near the end effector's old path, the rest anywhere about a link.
     old = np.linalg.norm(grown.positions[:, 5] - grown.positions[:, 4], axis=-1)
     assert 0.2 < (old < 0.5).mean() < 0.9
+
+
+def test_a_dyad_hangs_the_end_effector_on_a_new_loop_near_its_old_path():
+    batch = _padded_crank_rocker(64)
+    before = validate(batch, keep_motion=True, backend="numpy")
+    paths = np.stack([before.motion.x, before.motion.y], -1)  # (B, N, T, 2)
+    grown = with_dyad(batch, paths, np.random.default_rng(0))
+    assert len(grown) == 64 and (grown.end_effector == 6).all() and (grown.valid.sum(1) == 7).all()
+    after = validate(grown, keep_motion=True, backend="numpy")
+    assert after.valid.all()
+    # Each transmission angle of the new dyad stays within acos(DYAD_SLACK) of a right angle
+    # (up to the sampling of the revolution), so it is far from locking.
+    assert after.margin.min() > 0.02
+    xy = np.stack([after.motion.x, after.motion.y], -1)
+    for row in range(len(grown)):
+        assert set(np.flatnonzero(grown.adjacency[row, 6])) == {4, 5}  # old end effector, A
+        q, r = np.flatnonzero(grown.adjacency[row, 5, :5])  # the link A hangs on
+        for p in (q, r):  # A is a coupler point of its link, on another body than E's
+            assert np.ptp(np.linalg.norm(xy[row, 5] - xy[row, p], axis=-1)) < 1e-9
+        assert not (grown.adjacency[row, 4, q] and grown.adjacency[row, 4, r])
+        cos = _cosines(xy[row, 6], xy[row, 4], xy[row, 5])
+        assert np.abs(cos).max() <= DYAD_SLACK + 0.01 and np.ptp(cos) > 0.5  # a loop that moves
+    # The new end effector starts near the old path: within half its RMS radius on most.
+    old = xy[:, 4] - xy[:, 4].mean(1, keepdims=True)
+    radius = np.sqrt((old**2).sum(-1).mean(1))
+    off = np.linalg.norm(xy[:, 6] - xy[:, 4], axis=-1).max(1) / radius
+    assert np.median(off) < 0.5 and off.min() < 0.15
+
+
+def _cosines(apex: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """(T,) cosine of the angle at `apex` between its links to `first` and `second`."""
+    u, v = first - apex, second - apex
+    return (u * v).sum(-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
 
 
 @pytest.mark.parametrize("max_joints", [5, None])
