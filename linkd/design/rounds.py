@@ -25,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from linkd.batch import LinkageBatch
+from linkd.kinematics import dyad, ops_for
 from linkd.validator import validate
 
 from .propose import Candidates, joined
@@ -87,9 +88,10 @@ def with_dyad(batch: LinkageBatch, paths: np.ndarray, rng: np.random.Generator) 
     """The linkages, each with two joints more and a new loop (`paths`: (B, N, T, 2) every
     joint's path): a coupler point A on a link (Q, R) of a neighbouring body, a little off the
     joint Q that body shares with the end effector E's, and a new end effector hung on E and
-    A. E's distance to A varies only as much as A sits off Q, and the new link at E is just
-    long enough to take that up (transmission angles of acos(DYAD_SLACK) at worst), so the new
-    path starts near the old one. Rows with no such link are dropped."""
+    A. E's distance to A varies only as much as A sits off Q, and the two new links are sized
+    from its least and most over the revolution (`_dyad_links`), so the new path starts near
+    the old one. Each row needs room for two joints more; rows with no such link are
+    dropped."""
     b, n = batch.valid.shape
     rows, ee = np.arange(b), batch.end_effector
     on_ee = batch.adjacency[rows, ee]  # (B, N) joints E hangs on or that hang on E
@@ -111,7 +113,9 @@ def with_dyad(batch: LinkageBatch, paths: np.ndarray, rng: np.random.Generator) 
     new = batch.valid.sum(1)  # valid joints come first: A, then the end effector
     grown = _hung(batch, new, q, r, anchor(batch.positions))
     e, a = grown.positions[rows, ee], grown.positions[rows, new]
-    grown = _hung(grown, new + 1, ee, new, _apex(e, a, short, long, rng.choice([-1.0, 1.0], b)))
+    side = rng.choice([-1.0, 1.0], b)
+    x, y, _ = dyad(e[:, 0], e[:, 1], a[:, 0], a[:, 1], short**2, long**2, side, ops_for(e))
+    grown = _hung(grown, new + 1, ee, new, np.stack([x, y], 1))
     grown.end_effector = new + 1
     return grown.subset(np.flatnonzero(pool.any((1, 2))))
 
@@ -139,17 +143,6 @@ def _hung(batch: LinkageBatch, new: np.ndarray, first: np.ndarray, second: np.nd
     for end in (first, second):
         grown.adjacency[rows, new, end] = grown.adjacency[rows, end, new] = True
     return grown
-
-
-def _apex(e: np.ndarray, a: np.ndarray, short: np.ndarray, long: np.ndarray,
-          side: np.ndarray) -> np.ndarray:  # fmt: skip
-    """(B, 2) the point `short` from `e` and `long` from `a`, on `side` (+1 or -1) of e to a."""
-    d = np.maximum(np.linalg.norm(a - e, axis=1), 1e-12)
-    unit = (a - e) / d[:, None]
-    normal = np.stack([-unit[:, 1], unit[:, 0]], 1)
-    x = (short**2 - long**2 + d**2) / (2 * d)
-    y = np.sqrt(np.maximum(short**2 - x**2, 0)) * side
-    return e + _times(unit, x) + _times(normal, y)
 
 
 def _times(vectors: np.ndarray, factors: np.ndarray) -> np.ndarray:
