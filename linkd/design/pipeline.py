@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +38,7 @@ from linkd import __version__
 from linkd.batch import LinkageBatch
 from linkd.constraints import Constraints, binding, check, describe, no_design
 from linkd.curves import normalise, read_path
+from linkd.export import buildable
 from linkd.outdir import staged_output
 from linkd.scale import check_curve_size
 
@@ -53,6 +55,8 @@ from .stroke import Goal, make_goal
 
 DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
 FAILURES_PER_TOPOLOGY = 2  # designs of one topology tried before the next topology
+QUICK_AFTER = 4  # export refusals after which the next designs are checked quickly first
+QUICK_CHECKS = 200  # quick checks (about 20 ms each) before delivery gives up
 
 
 @dataclass(frozen=True)
@@ -189,7 +193,11 @@ def _deliver(
     was passed over; then the alternatives, if asked for. Past the time budget's end (`ends`,
     a `time.monotonic()` value) the export no longer tries the slow bracket construction. With
     constraints, only designs that meet them all, measured exactly in the user's units, are
-    exported; the measurements of the one delivered come back too."""
+    exported; the measurements of the one delivered come back too. After QUICK_AFTER export
+    refusals each next design is first checked quickly (straight links at the usual width,
+    what most designs that build need) and passed over untried if that refuses it: a ranking
+    full of designs that cannot be built flat, as long budgets' rounds leave, costs a few
+    seconds, not the attempts, and still delivers."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     c = o.constraints
@@ -200,15 +208,30 @@ def _deliver(
         order = order[feasible[order]]
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
         found, tried, measured, unmet, failed = None, 0, [], [], {}
-        for row in order:
+        quick, refused = 0, 0  # quick checks, and designs they passed over
+        grown = candidates.source == SOURCES.index("round 2")
+
+        def halfway() -> bool:  # half the attempts made, by the count as it stands
+            return tried >= o.attempts // 2
+
+        for row in _ranked(order, grown, halfway):
             # Later rounds fill the top of the ranking with near copies of a few designs: a
             # topology that failed twice is not tried again.
             key = topology_key(batch, int(row))
             if failed.get(key, 0) >= FAILURES_PER_TOPOLOGY:
                 continue
-            tried += 1
             candidate = pruned(batch.subset([int(row)]))
             mech, measured = _checked(candidate, frame, o, _range(candidates, row))
+            if mech is not None and skipped["unbuildable"] >= QUICK_AFTER:
+                if quick == QUICK_CHECKS:
+                    break
+                quick += 1
+                if not buildable(mech, quick=True):  # not a try: the check costs little
+                    skipped["unbuildable"] += 1
+                    refused += 1
+                    failed[key] = failed.get(key, 0) + 1
+                    continue
+            tried += 1
             if mech is None:  # within the screening's sampling, but not exactly
                 unmet.append(next(m for m in measured if not m.holds))
             else:
@@ -224,7 +247,8 @@ def _deliver(
             raise NoDesign(f"{no_design(unmet[0], o.units)}; in the best, "
                            f"{describe(unmet[0], o.units)}")  # fmt: skip
         if found is None:
-            raise NoDesign(f"none of the best {tried} designs passed validation and MuJoCo")
+            more = f" ({refused} more checked could not be built)" if refused else ""
+            raise NoDesign(f"none of the best {tried} designs passed validation and MuJoCo{more}")
         note(f"{found.mechanism.n_nodes} joints, {found.export.layers} layers, passed "
              f"on try {tried}")  # fmt: skip
         alternatives = []
@@ -233,6 +257,20 @@ def _deliver(
                                          source)  # fmt: skip
             note(f"{len(alternatives)} alternatives")
     return found, alternatives, measured
+
+
+def _ranked(order: np.ndarray, grown: np.ndarray, fall_back: Callable[[], bool]) -> Iterator:
+    """The rows in `order` until `fall_back()` says so, then those of them not `grown` by the
+    later rounds that were not given yet. A long budget's rounds can fill the top of the ranking
+    with large designs that MuJoCo cannot prove (loops that open by more than its tolerance);
+    the designs they grew from are smaller and mostly pass."""
+    given = set()
+    for row in order:
+        if fall_back():
+            break
+        given.add(int(row))
+        yield int(row)
+    yield from (int(row) for row in order[~grown[order]] if int(row) not in given)
 
 
 def _checked(candidate: LinkageBatch, frame, o: DesignOptions, crank_range=None) -> tuple:

@@ -1,0 +1,70 @@
+"""Delivery passes over designs the export refuses, quickly once a few have been refused
+(linkd.design.pipeline._deliver)."""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+from test_export_narrow import TANGLED
+from test_rounds import STUBBORN
+
+from linkd import classic
+from linkd.batch import LinkageBatch
+from linkd.design import pipeline
+from linkd.design.output import SKIP_REASONS
+from linkd.design.pipeline import DesignOptions, NoDesign, _ranked
+from linkd.design.propose import Candidates
+from linkd.design.select import end_effector_path
+from linkd.design.stages import Stages
+from linkd.geometry import Similarity
+
+ROCKER = classic.crank_rocker()
+
+
+def _delivered(mechanisms, folder, **options):
+    """The design delivered from `mechanisms`, ranked in that order, and what was skipped."""
+    batch = LinkageBatch.from_mechanisms(mechanisms)
+    candidates = Candidates(batch, np.arange(len(mechanisms)) * 0.1)
+    skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))
+    points = end_effector_path(ROCKER)[0]
+    found, _, _ = pipeline._deliver(candidates, Similarity(), points,
+                                    DesignOptions(formats=frozenset({"mjcf"}), **options),
+                                    Stages(False), folder, {}, skipped, np.inf)  # fmt: skip
+    return found.mechanism, skipped
+
+
+def _same(mech, other) -> bool:
+    """Whether two mechanisms have their joints at the same places (in any order)."""
+    a, b = (np.unique(m.positions.round(6), axis=0) for m in (mech, other))
+    return a.shape == b.shape and np.allclose(a, b)
+
+
+def test_after_a_refusal_designs_are_checked_quickly_before_a_try(tmp_path, monkeypatch):
+    monkeypatch.setattr(pipeline, "QUICK_AFTER", 1)
+    monkeypatch.setattr(pipeline, "FAILURES_PER_TOPOLOGY", 3)
+    # STUBBORN is refused by the export; then the quick check refuses it twice more, and
+    # TANGLED (which only narrower links build), without a try.
+    found, skipped = _delivered([STUBBORN] * 3 + [TANGLED, ROCKER], tmp_path)
+    assert _same(found, ROCKER) and skipped["unbuildable"] == 4
+
+
+def test_without_the_quick_checks_the_slower_constructions_are_tried(tmp_path, monkeypatch):
+    monkeypatch.setattr(pipeline, "QUICK_AFTER", 10)
+    found, skipped = _delivered([STUBBORN, TANGLED, ROCKER], tmp_path)
+    assert _same(found, TANGLED) and skipped["unbuildable"] == 1
+
+
+def test_delivery_gives_up_after_its_quick_checks(tmp_path, monkeypatch):
+    monkeypatch.setattr(pipeline, "QUICK_AFTER", 0)
+    monkeypatch.setattr(pipeline, "QUICK_CHECKS", 2)
+    with pytest.raises(NoDesign, match="2 more checked could not be built"):
+        _delivered([STUBBORN, TANGLED, ROCKER], tmp_path)
+
+
+def test_after_half_the_attempts_only_designs_the_rounds_did_not_grow_are_tried():
+    order = np.array([3, 0, 4, 1, 2])  # best first
+    grown = np.array([False, True, False, True, True])
+    given = []
+    for row in _ranked(order, grown, lambda: len(given) >= 2):
+        given.append(row)
+    assert given == [3, 0, 2]  # then the best not grown (0 was given already)
