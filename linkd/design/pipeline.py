@@ -197,7 +197,8 @@ def _deliver(
     refusals each next design is first checked quickly (straight links at the usual width,
     what most designs that build need) and passed over untried if that refuses it: a ranking
     full of designs that cannot be built flat, as long budgets' rounds leave, costs a few
-    seconds, not the attempts, and still delivers."""
+    seconds, not the attempts, and still delivers. After half the attempts, only designs the
+    later rounds did not grow are tried (`_ranked`)."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     c = o.constraints
