@@ -36,7 +36,7 @@ MAX_CHECKS = 3  # topologies asked about, per design searched around
 DYAD_SHARE = 0.5  # share of the copies with room for two joints more grown by a dyad
 DYAD_ALONG = (0.02, 0.2)  # the new coupler point's offset from Q along its link, in its lengths
 DYAD_ACROSS = (0.07, 0.2)  # and across it, either way (its triangle with the link is no sliver)
-DYAD_SLACK = 0.7  # the new link at E is 1/DYAD_SLACK times the least that closes the loop
+DYAD_SLACK = 0.7  # cosine of the new end effector's transmission angle at its extremes
 NEAR_END_EFFECTOR = 0.5  # share of grown copies whose new joint starts near the end effector
 
 
@@ -102,16 +102,11 @@ def with_dyad(batch: LinkageBatch, paths: np.ndarray, rng: np.random.Generator) 
     q, r = np.unravel_index(pick, (n, n))
     along = rng.uniform(*DYAD_ALONG, b)
     across = rng.uniform(*DYAD_ACROSS, b) * rng.choice([-1.0, 1.0], b)
-
-    def anchor(points: np.ndarray) -> np.ndarray:  # A from joints' positions or paths
-        link = points[rows, r] - points[rows, q]
-        normal = np.stack([-link[..., 1], link[..., 0]], -1)
-        return points[rows, q] + _times(link, along) + _times(normal, across)
-
-    distance = np.linalg.norm(anchor(paths) - paths[rows, ee], axis=-1)  # (B, T)
+    anchor_path = _off_link(paths, q, r, along, across)  # (B, T, 2)
+    distance = np.linalg.norm(anchor_path - paths[rows, ee], axis=-1)  # (B, T)
     short, long = _dyad_links(distance.min(1), distance.max(1))
     new = batch.valid.sum(1)  # valid joints come first: A, then the end effector
-    grown = _hung(batch, new, q, r, anchor(batch.positions))
+    grown = _hung(batch, new, q, r, _off_link(batch.positions, q, r, along, across))
     e, a = grown.positions[rows, ee], grown.positions[rows, new]
     side = rng.choice([-1.0, 1.0], b)
     x, y, _ = dyad(e[:, 0], e[:, 1], a[:, 0], a[:, 1], short**2, long**2, side, ops_for(e))
@@ -145,6 +140,16 @@ def _hung(batch: LinkageBatch, new: np.ndarray, first: np.ndarray, second: np.nd
     return grown
 
 
+def _off_link(points: np.ndarray, first: np.ndarray, second: np.ndarray, along: np.ndarray,
+              across: np.ndarray) -> np.ndarray:  # fmt: skip
+    """Each row's point `along` its link from joint `first` to `second` and `across` it, in
+    the link's lengths, from the joints' positions (B, N, 2) or paths (B, N, T, 2)."""
+    rows = np.arange(len(points))
+    link = points[rows, second] - points[rows, first]
+    normal = np.stack([-link[..., 1], link[..., 0]], -1)
+    return points[rows, first] + _times(link, along) + _times(normal, across)
+
+
 def _times(vectors: np.ndarray, factors: np.ndarray) -> np.ndarray:
     """Each row's vectors, (B, 2) or (B, T, 2), times its factor."""
     return vectors * factors.reshape(-1, *([1] * (vectors.ndim - 1)))
@@ -155,7 +160,6 @@ def with_coupler_point(batch: LinkageBatch, rng: np.random.Generator) -> Linkage
     with a new last joint, its end effector, hung on both ends of one such link: near the old
     end effector on one of its links (a NEAR_END_EFFECTOR share), else anywhere about any."""
     b, n = batch.valid.shape
-    rows = np.arange(b)
     links = _moving_links(batch)
     ee = batch.end_effector
     is_ee = np.arange(n) == ee[:, None]
@@ -166,19 +170,12 @@ def with_coupler_point(batch: LinkageBatch, rng: np.random.Generator) -> Linkage
     first, second = np.unravel_index(pick, (n, n))
     swap = second == ee  # start from the end effector's end
     first, second = np.where(swap, second, first), np.where(swap, first, second)
-    start = batch.positions[rows, first]
-    along = batch.positions[rows, second] - start
-    across = np.stack([-along[:, 1], along[:, 0]], 1)
     s = np.where(near, rng.normal(0, 0.15, b), rng.uniform(-0.5, 1.5, b))
     t = np.where(near, rng.normal(0, 0.15, b), rng.normal(0, 0.5, b))
     new = batch.valid.sum(1)  # valid joints come first
-    batch.positions[rows, new] = start + s[:, None] * along + t[:, None] * across
-    batch.valid[rows, new] = True
-    batch.fixed[rows, new] = False
-    for ends in (first, second):
-        batch.adjacency[rows, new, ends] = batch.adjacency[rows, ends, new] = True
-    batch.end_effector = new
-    return batch
+    grown = _hung(batch, new, first, second, _off_link(batch.positions, first, second, s, t))
+    grown.end_effector = new
+    return grown
 
 
 def jittered(batch: LinkageBatch, spread: float, rng: np.random.Generator) -> LinkageBatch:
