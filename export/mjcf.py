@@ -36,6 +36,10 @@ from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
 TIMESTEP = 2.5e-4  # s, the default
+CCD_TOLERANCE = 1e-6  # m, MuJoCo's own for the distance between convex meshes
+CCD_SHARE = 0.01  # of the least gap between parts: the tolerance where that is finer, as a
+# sub-millimetre mechanism's gaps (microns) come near MuJoCo's own, which then finds contacts
+# between parts that do not touch
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
 MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
@@ -195,6 +199,9 @@ def build_mjcf(
                   boundmass=_fmt(MIN_MASS), boundinertia=_fmt(MIN_INERTIA))  # fmt: skip
     option = ET.SubElement(root, "option", timestep=_fmt(TIMESTEP), integrator="RK4",
                            solver="Newton", iterations="50", tolerance="1e-12")  # fmt: skip
+    gap = min(sizes.layer_gap, sizes.clearance) * b.unit
+    if CCD_SHARE * gap < CCD_TOLERANCE:
+        option.set("ccd_tolerance", _fmt(CCD_SHARE * gap))
     ET.SubElement(option, "flag", filterparent="disable")
     default = ET.SubElement(root, "default")
     ET.SubElement(default, "joint", type="hinge", axis="0 0 1")

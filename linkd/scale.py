@@ -1,9 +1,10 @@
 """The sizes linkd can build, checked before any work so extremes fail with one clear line.
 
 Exported parts follow a mechanism's own scale (`linkd.export.options`). Plates under MuJoCo's
-mesh volume floor are weighed by their surface (`linkd.export.mjcf`), so generator mechanisms
-still verify at 0.3 mm across, but not at 0.1 mm (dynamics and contacts fail): half a millimetre
-keeps a margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
+mesh volume floor are weighed by their surface, and the distance tolerance of its mesh collisions
+follows the parts' gaps (`linkd.export.mjcf`), so generator mechanisms verify down to 0.04 mm
+across, but not at 0.02 mm (dynamics and contacts fail): a tenth of a millimetre keeps a
+margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
 (`linkd verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve
 and usually several times more, so a curve is held to a smaller top size than a mechanism.
 """
@@ -15,8 +16,8 @@ import numpy as np
 from linkd.errors import InputError
 from linkd.mechanism import UNITS_IN_METRES
 
-MECHANISM_RANGE_M = (5e-4, 1e3)  # across, metres: what export and verification handle
-CURVE_RANGE_M = (2.5e-4, 1e2)  # across, metres: leaves room for the mechanism around the curve
+MECHANISM_RANGE_M = (1e-4, 1e3)  # across, metres: what export and verification handle
+CURVE_RANGE_M = (5e-5, 1e2)  # across, metres: leaves room for the mechanism around the curve
 
 
 def across(points: np.ndarray) -> float:
