@@ -172,6 +172,9 @@ def test_plates_on_one_layer_collide(jansen_export: Path, tmp_path: Path) -> Non
     assert not report.passed and "collisions" in report.failed
     collisions = next(c for c in report.checks if c.name == "collisions")
     assert "contact" in collisions.detail and "deg" in collisions.detail
+    # the dynamic run looks for contacts after each step and stops at the first
+    dynamics = next(c for c in report.checks if c.name == "dynamics")
+    assert "stopped at a contact" in dynamics.detail and "(dynamic run)" in collisions.detail
 
 
 def test_removed_loop_closure_frees_a_joint(jansen_export: Path, tmp_path: Path) -> None:

@@ -4,6 +4,9 @@ The control ramps from 0 to 2*pi over RAMP_S seconds, then holds for SETTLE_S. A
 the positions are brought up to date (`mj_kinematics`) and recorded; loop violation and path
 error are computed afterwards for all steps at once. The run stops at the first contact between
 parts: from there on it no longer tests the design (the collisions check names the pair).
+Contacts are looked for once a step, at its new positions (`mj_collision`), not in each of the
+integrator's four stages: until the first contact no contact force acts either way, and mesh
+collisions were five sixths of a step's time.
 """
 
 from __future__ import annotations
@@ -44,21 +47,30 @@ def simulate(model: Any) -> dict[str, Any]:
     angle, ends, anchors = [], [], []
     first_contact = None
     finite = True
+    flags = model.opt.disableflags
+    stepping = flags | mujoco.mjtDisableBit.mjDSBL_CONTACT.value
     with capture_warnings() as messages:
-        for _ in range(steps):
-            data.ctrl[motor] = 2 * np.pi * min(data.time / RAMP_S, 1.0)
-            mujoco.mj_step(model, data)
-            if data.ncon:  # parts touch: the run no longer tests the design; stop here
-                pair = data.contact.geom[0]
-                first_contact = (int(pair[0]), int(pair[1]), data.qpos[crank] - model.qpos0[crank])
-                break
-            if not (np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all()):
-                finite = False
-                break
-            mujoco.mj_kinematics(model, data)
-            angle.append(data.qpos[crank] - model.qpos0[crank])
-            ends.append(data.site_xpos[ee, :2].copy())
-            anchors.append(connects.points(data)[..., :2])
+        try:
+            for _ in range(steps):
+                data.ctrl[motor] = 2 * np.pi * min(data.time / RAMP_S, 1.0)
+                model.opt.disableflags = stepping
+                mujoco.mj_step(model, data)
+                model.opt.disableflags = flags
+                if not (np.isfinite(data.qpos).all() and np.isfinite(data.qvel).all()):
+                    finite = False
+                    break
+                mujoco.mj_kinematics(model, data)
+                mujoco.mj_collision(model, data)
+                if data.ncon:  # parts touch: the run no longer tests the design; stop here
+                    pair = data.contact.geom[0]
+                    first_contact = (int(pair[0]), int(pair[1]),
+                                     data.qpos[crank] - model.qpos0[crank])  # fmt: skip
+                    break
+                angle.append(data.qpos[crank] - model.qpos0[crank])
+                ends.append(data.site_xpos[ee, :2].copy())
+                anchors.append(connects.points(data)[..., :2])
+        finally:
+            model.opt.disableflags = flags
     counted = sum(int(w.number) for w in data.warning)
     return {
         "angle": np.array(angle),
