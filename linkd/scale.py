@@ -3,8 +3,8 @@
 Exported parts follow a mechanism's own scale (`linkd.export.options`). Plates under MuJoCo's
 mesh volume floor are weighed by their surface, and the distance tolerance of its mesh collisions
 follows the parts' gaps (`linkd.export.mjcf`), so generator mechanisms verify down to 0.04 mm
-across, but not at 0.02 mm (dynamics and contacts fail): a tenth of a millimetre keeps a
-margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
+across, but only half of them at 0.02 mm (dynamics and contacts fail): a tenth of a millimetre
+keeps a margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
 (`linkd verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve
 and usually several times more, so a curve is held to a smaller top size than a mechanism.
 """
