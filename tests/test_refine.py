@@ -48,6 +48,30 @@ def test_lbfgs_solves_independent_ill_conditioned_problems():
     assert iterations < 200  # stops once every row has converged
 
 
+def test_lbfgs_rows_do_not_wait_for_each_others_line_searches():
+    # Row 0 is an ill-conditioned bowl; row 1 is |x| next to its kink, where trials fail.
+    scales = torch.tensor([1.0, 10.0, 100.0], dtype=torch.float64)
+
+    def evaluate(x, rows):
+        bowl = (scales * (x - 1) ** 2).sum(1), 2 * scales * (x - 1)
+        kink = x.abs().sum(1), torch.sign(x)
+        smooth = (rows == 0)[:, None]
+        return torch.where(smooth[:, 0], bowl[0], kink[0]), torch.where(smooth, bowl[1], kink[1])
+
+    calls = []
+
+    def counted(x, rows):
+        calls.append(len(rows))
+        return evaluate(x, rows)
+
+    alone, needed = minimise(evaluate, torch.zeros(1, 3, dtype=torch.float64), 200)
+    start = torch.tensor([[0.0, 0.0, 0.0], [0.004, 0.004, 0.004]], dtype=torch.float64)
+    x, iterations = minimise(counted, start, needed)
+    assert torch.allclose(alone[0], torch.ones(3, dtype=torch.float64), atol=1e-6)
+    assert torch.equal(x[0], alone[0])  # as fast as alone, beside a row that backtracks
+    assert len(calls) == iterations + 1  # one evaluation of the rows still searching each time
+
+
 def test_polyline_chamfer_ignores_sampling_density():
     target = torch.as_tensor(resample(ellipse(1000), 200))  # the target is evenly resampled
     # The same curve, traced with a very uneven speed: the distance stays near zero.

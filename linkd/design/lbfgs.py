@@ -3,9 +3,12 @@
 torch's own L-BFGS minimises one function; summing independent problems into it would make them
 share a step length and a curvature model. Here every row of the batch keeps its own history,
 its own step and its own backtracking (Armijo) line search, while each evaluation runs all the
-rows still searching at once. Evaluations are mostly fixed overhead at the batch sizes used, so
-a line search gets a few evaluations at most: a row that finds no decrease by then stays put,
-forgets its history and starts again from a shorter steepest-descent step.
+rows still searching at once, each at its own trial step: a row whose step is accepted takes
+its next direction while another tries a shorter step (a line search in lockstep would run
+each evaluation's tries one after the other, mostly for a few rows, and evaluations are mostly
+fixed overhead at the batch sizes used). A line search gets a few trials at most: a row that
+finds no decrease by then forgets its history and starts again from a shorter steepest-descent
+step.
 """
 
 from __future__ import annotations
@@ -35,62 +38,90 @@ def minimise(
 ) -> tuple[torch.Tensor, int]:
     """Minimise the B independent functions of `evaluate` from x (B, D); returns (x, iterations).
 
+    iterations: evaluations of every row still searching, each row trying one step of its own
+    line search (a row whose first step is accepted goes on with its next direction).
     first_step: the length of a steepest-descent step (the first one, or after a reset).
     deadline: a `time.monotonic()` value after which no new iteration starts.
     on_iteration: called with the number of iterations done after each one (for progress).
     """
-    bsz, dim = x.shape
-    s_hist = x.new_zeros(bsz, history, dim)
-    y_hist = x.new_zeros(bsz, history, dim)
-    rho = x.new_zeros(bsz, history)  # 1 / (s . y); 0 marks an empty slot
-    plain = torch.full((bsz,), first_step, dtype=x.dtype)  # steepest-descent step length
-    every = torch.arange(bsz)
+    x = x.clone()
+    state = _State(x, history, first_step)
+    every = torch.arange(len(x))
     f, g = evaluate(x, every)
+    state.aim(every, g)
     done = 0
+    if not state.active.any():
+        return x, done
     for done in range(1, iterations + 1):
-        active = (plain >= SHORTEST) & (g.norm(dim=1) > FLAT)
-        fresh = (rho == 0).all(1)  # no history: this step is steepest descent
-        direction = _direction(g, s_hist, y_hist, rho, plain)
-        slope = (g * direction).sum(1)
-        tolerance = 1e-6 * f.abs()  # float32 rounding in f
-        step = torch.ones_like(f)
-        pending = active.clone()
-        x_new, f_new, g_new = x.clone(), f.clone(), g.clone()
-        for _ in range(TRIES):
-            rows = every[pending]
-            if len(rows) == 0:
-                break
-            trial = x[rows] + step[rows, None] * direction[rows]
-            f_try, g_try = evaluate(trial, rows)
-            bound = f[rows] + ARMIJO * step[rows] * slope[rows] + tolerance[rows]
-            accept = torch.isfinite(f_try) & (f_try <= bound)
-            good = rows[accept]
-            x_new[good], f_new[good], g_new[good] = trial[accept], f_try[accept], g_try[accept]
-            pending[good] = False
-            # Next step: the minimum of the parabola through f(0), f'(0) and f(step), kept
-            # within [0.1, 0.5] of the step that failed.
-            t, f0, d0 = step[rows], f[rows], slope[rows]
-            rise = torch.nan_to_num(f_try - f0 - d0 * t, nan=torch.inf).clamp_min(1e-30)
-            shrink = (-d0 * t / (2 * rise)).clamp(0.1, 0.5)
-            step[rows] = torch.where(accept, t, t * shrink)
-        moved = active & ~pending
-        s, y = x_new - x, g_new - g
-        sy = (s * y).sum(1)
-        keep = moved & (sy > 1e-10 * s.norm(dim=1) * y.norm(dim=1))
-        s_hist[keep] = torch.roll(s_hist[keep], 1, 1)
-        y_hist[keep] = torch.roll(y_hist[keep], 1, 1)
-        rho[keep] = torch.roll(rho[keep], 1, 1)
-        s_hist[keep, 0], y_hist[keep, 0], rho[keep, 0] = s[keep], y[keep], 1 / sy[keep]
-        failed = active & pending
-        plain = torch.where(failed & fresh, plain * 0.1, plain)  # steepest descent failed too
-        plain = torch.where(moved & fresh, (plain * 2).clamp_max(10 * first_step), plain)
-        rho[failed] = 0
-        x, f, g = x_new, f_new, g_new
+        rows = every[state.active]
+        step, direction, slope = state.step[rows], state.direction[rows], state.slope[rows]
+        trial = x[rows] + step[:, None] * direction
+        f_try, g_try = evaluate(trial, rows)
+        bound = f[rows] + ARMIJO * step * slope + 1e-6 * f[rows].abs()  # float32 rounding in f
+        accept = torch.isfinite(f_try) & (f_try <= bound)
+        good = rows[accept]
+        state.remember(good, trial[accept] - x[good], g_try[accept] - g[good])
+        x[good], f[good], g[good] = trial[accept], f_try[accept], g_try[accept]
+        # A failed trial: the next is the minimum of the parabola through f(0), f'(0) and
+        # f(step), kept within [0.1, 0.5] of the step that failed.
+        t, f0, d0 = step[~accept], f[rows[~accept]], slope[~accept]
+        rise = torch.nan_to_num(f_try[~accept] - f0 - d0 * t, nan=torch.inf).clamp_min(1e-30)
+        given_up = state.shorten(rows[~accept], t * (-d0 * t / (2 * rise)).clamp(0.1, 0.5))
+        state.aim(torch.cat([good, given_up]), g)
         if on_iteration is not None:
             on_iteration(done)
-        if not active.any() or (deadline is not None and time.monotonic() > deadline):
+        if not state.active.any() or (deadline is not None and time.monotonic() > deadline):
             break
     return x, done
+
+
+class _State:
+    """Every row's L-BFGS history and current line search."""
+
+    def __init__(self, x: torch.Tensor, history: int, first_step: float):
+        bsz, dim = x.shape
+        self.first_step = first_step
+        self.s = x.new_zeros(bsz, history, dim)
+        self.y = x.new_zeros(bsz, history, dim)
+        self.rho = x.new_zeros(bsz, history)  # 1 / (s . y); 0 marks an empty slot
+        self.plain = torch.full((bsz,), first_step, dtype=x.dtype)  # steepest-descent length
+        self.direction = torch.zeros_like(x)
+        self.slope = x.new_zeros(bsz)  # of f along the direction
+        self.step = x.new_ones(bsz)  # the next trial's multiple of the direction
+        self.tries = torch.zeros(bsz, dtype=torch.long)  # trials along this direction so far
+        self.fresh = torch.ones(bsz, dtype=torch.bool)  # the direction is steepest descent
+        self.active = torch.ones(bsz, dtype=torch.bool)  # still searching
+
+    def remember(self, rows: torch.Tensor, s: torch.Tensor, y: torch.Tensor) -> None:
+        """Rows whose trial step s was accepted, changing the gradient by y: a longer
+        steepest-descent step next time if this was one, and the pair where it curves up."""
+        sy = (s * y).sum(1)
+        new = sy > 1e-10 * s.norm(dim=1) * y.norm(dim=1)
+        kept = rows[new]
+        for table in (self.s, self.y, self.rho):
+            table[kept] = torch.roll(table[kept], 1, 1)
+        self.s[kept, 0], self.y[kept, 0], self.rho[kept, 0] = s[new], y[new], 1 / sy[new]
+        grown = (self.plain[rows] * 2).clamp_max(10 * self.first_step)
+        self.plain[rows] = torch.where(self.fresh[rows], grown, self.plain[rows])
+
+    def shorten(self, rows: torch.Tensor, step: torch.Tensor) -> torch.Tensor:
+        """Rows whose trial failed try `step` next; those out of tries forget their history (a
+        shorter steepest-descent step if that failed too) and are returned, to start again."""
+        self.step[rows] = step
+        self.tries[rows] += 1
+        out = rows[self.tries[rows] >= TRIES]
+        self.plain[out] = torch.where(self.fresh[out], self.plain[out] * 0.1, self.plain[out])
+        self.rho[out] = 0
+        return out
+
+    def aim(self, rows: torch.Tensor, g: torch.Tensor) -> None:
+        """A new search direction for `rows` from their gradients g (all rows) and histories."""
+        rho = self.rho[rows]
+        d = _direction(g[rows], self.s[rows], self.y[rows], rho, self.plain[rows])
+        self.direction[rows], self.slope[rows] = d, (g[rows] * d).sum(1)
+        self.fresh[rows] = (rho == 0).all(1)
+        self.step[rows], self.tries[rows] = 1.0, 0
+        self.active[rows] = (self.plain[rows] >= SHORTEST) & (g[rows].norm(dim=1) > FLAT)
 
 
 def _direction(

@@ -42,8 +42,8 @@ KD_PAIRS = 2**18  # path points x target points from which nearest vertices come
 class RefineSettings:
     """Lengths are in the target's normalised frame (centroid 0, RMS radius 1)."""
 
-    iterations: int = 160  # L-BFGS iterations in all
-    ordered_iterations: int = 60  # the first ones refine every variant and weigh the ordered
+    iterations: int = 210  # L-BFGS iterations in all (each a trial step of every variant)
+    ordered_iterations: int = 80  # the first ones refine every variant and weigh the ordered
     keep: int = 16  # term too; the rest refine only the best `keep` variants, on Chamfer alone
     # Each candidate is refined in one variant per weight of the ordered term (next to the
     # Chamfer distance): a heavier one helps a path find parts of the target it misses, a

@@ -55,12 +55,12 @@ if TYPE_CHECKING:
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 FINE_POINTS = 1000  # of a drawn loop's target in the polish: a 200-point one, filtered at half
 # its spacing, rounds corners the user's own points keep
-ROUND_ITERATIONS = 100  # L-BFGS iterations of a later round's copies in the default budget
-ROUND_ORDERED_ITERATIONS = 40  # of which the first, every copy, at the coarse angles
+ROUND_ITERATIONS = 130  # L-BFGS iterations of a later round's copies in the default budget
+ROUND_ORDERED_ITERATIONS = 50  # of which the first, every copy, at the coarse angles
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 POLISH = 8  # best designs refined again at the end at finer angles, for each 30 s of the budget
 POLISH_ANGLES = 1024
-POLISH_ITERATIONS = 150
+POLISH_ITERATIONS = 200
 POLISH_SHARE = 0.1  # of the budget kept from the rounds for the polish (a long budget's rounds
 # would run to the deadline and leave it none)
 
