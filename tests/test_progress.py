@@ -25,7 +25,10 @@ def test_refinement_reports_each_iteration_and_the_best_error_so_far():
     done, best = np.array(calls).T
     assert result.iterations > settings.ordered_iterations  # both phases reported
     np.testing.assert_array_equal(done, np.arange(1, result.iterations + 1))
-    assert np.all(np.diff(best) <= 0) and best[-1] == result.chamfer.min()
+    # The best error never rises within a phase; the second phase measures it at finer angles.
+    coarse, fine = np.split(best, [settings.ordered_iterations])
+    assert np.all(np.diff(coarse) <= 0) and np.all(np.diff(fine) <= 0)
+    assert best[-1] == result.chamfer.min()
 
 
 def test_progress_replaces_the_spinner_text_on_a_terminal_only(capsys):
