@@ -25,7 +25,17 @@ from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
 from .layers import Layout, assign_layers, plate_points, plates, post_spans, sweep
-from .mjcf import TIMESTEP, build_mjcf, build_scene, qpos_at, retimed, servo_gains
+from .mjcf import (
+    PROBE_DENSITY,
+    TIMESTEP,
+    build_mjcf,
+    build_scene,
+    density_scale,
+    floored,
+    qpos_at,
+    retimed,
+    servo_gains,
+)
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .routing import bent_layers
@@ -80,7 +90,7 @@ def export_mechanism(
         meshes, wholes, volumes = _write_meshes(mech, assembly, layout, sizes, out_dir)
     files += [Path(path) for path in {*meshes.values(), *wholes.values()}]
     if "mjcf" in formats:
-        _write_model(mech, assembly, layout, sizes, meshes, volumes, out_dir)
+        sizes = _write_model(mech, assembly, layout, sizes, meshes, volumes, out_dir)
         files += [Path(MODEL), Path(SCENE)]
     parts = describe_parts(assembly, layout, sizes, wholes, meshes)
     mech.replace(extra={**mech.extra, "layers": layout.count, "parts": parts}).save(
@@ -161,16 +171,27 @@ def _write_model(
     meshes: dict,
     volumes: dict,
     out: Path,
-) -> None:
+) -> Sizes:
     """mechanism.xml (compiled once to size the crank servo from the model's own inertia), with
-    the model's mesh paths and volumes from `_write_meshes`."""
+    the model's mesh paths and volumes from `_write_meshes`; the sizes with the density used,
+    raised where MuJoCo's mass floors would distort a millimetre-sized model (`density_scale`)."""
     import mujoco
 
     path = out / MODEL
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, volumes=volumes))
-    servo = servo_gains(mujoco.MjModel.from_xml_path(str(path)), mech)
+
+    def compiled(s: Sizes) -> mujoco.MjModel:
+        path.write_text(build_mjcf(mech, assembly, layout, s, meshes, volumes=volumes))
+        return mujoco.MjModel.from_xml_path(str(path))
+
+    model = compiled(sizes)
+    if floored(model):
+        scale = density_scale(compiled(replace(sizes, density=sizes.density * PROBE_DENSITY)))
+        sizes = replace(sizes, density=sizes.density * scale)
+        model = compiled(sizes)
+    servo = servo_gains(model, mech)
     path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo, volumes))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
+    return sizes
 
 
 def set_timestep(out_dir: Path, timestep: float) -> None:

@@ -43,6 +43,8 @@ CCD_SHARE = 0.01  # of the least gap between parts: the tolerance where that is 
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
 SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
 MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
+FLOOR_MARGIN = 10.0  # a model's lightest moving body stays this far above both floors
+PROBE_DENSITY = 1e12  # times the density: a model at which no body of any buildable size is floored
 SMALL_MESH = 1e-14  # m^3: MuJoCo refuses a mesh's exact inertia under 1e-15 (mjMINVAL); a plate
 # of a millimetre-sized design below ten times that is weighed by its surface, its mass given
 SITE_RADIUS = 0.15  # of the link width
@@ -234,6 +236,27 @@ def build_mjcf(
                   kv=_fmt(servo.kv), ctrllimited="false")  # fmt: skip
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def floored(model) -> bool:
+    """Whether a moving body of the compiled model sits at MuJoCo's mass or inertia floor."""
+    moving = model.body_dofnum > 0
+    return bool((model.body_mass[moving] <= MIN_MASS * (1 + 1e-9)).any()
+                or (model.body_inertia[moving] <= MIN_INERTIA * (1 + 1e-9)).any())  # fmt: skip
+
+
+def density_scale(probe) -> float:
+    """The power of ten by which to raise the density so that every moving body's own mass and
+    inertia lie FLOOR_MARGIN above MuJoCo's floors, from the model compiled at PROBE_DENSITY
+    times the density. Millimetre-sized parts weigh less than the floors: raised to them, every
+    light part would weigh the same and turn like a flywheel, and the loops would need a step
+    tens of times finer. Scaling every mass alike changes no motion (the mechanism moves in the
+    plane, gravity along z, and the servo is sized from the model)."""
+    moving = probe.body_dofnum > 0
+    mass = probe.body_mass[moving].min() / PROBE_DENSITY
+    inertia = probe.body_inertia[moving].min() / PROBE_DENSITY
+    need = FLOOR_MARGIN * max(MIN_MASS / mass, MIN_INERTIA / inertia)
+    return float(10 ** np.ceil(np.log10(need))) if need > 1 else 1.0
 
 
 def solref(timestep: float) -> tuple[float, float]:

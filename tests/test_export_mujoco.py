@@ -196,11 +196,13 @@ def test_plates_under_the_mesh_volume_floor_keep_their_solid_mass(tmp_path):
     crank) take a shell inertia and the mass of their solid, so the model still compiles."""
     import trimesh
 
-    options = ExportOptions(link_width=0.0015, density=1e7)  # dense, to clear MuJoCo's mass floor
-    export_mechanism(classic.crank_rocker(), tmp_path, {"mjcf", "stl"}, options)
+    options = ExportOptions(link_width=0.0015)
+    result = export_mechanism(classic.crank_rocker(), tmp_path, {"mjcf", "stl"}, options)
     text = (tmp_path / "mechanism.xml").read_text()
     assert '<mesh name="link_0_1" file="meshes/link_0_1.stl" inertia="shell" />' in text
     model = mujoco.MjModel.from_xml_path(str(tmp_path / "mechanism.xml"))
     volume = trimesh.load(tmp_path / "meshes" / "link_0_1.stl").volume
     assert 0 < volume < mujoco.mjMINVAL
-    assert model.body("link_0_1").mass[0] == pytest.approx(1e7 * volume, rel=1e-6)
+    density = result.sizes["density"]  # raised clear of MuJoCo's mass floor
+    assert density > 1200
+    assert model.body("link_0_1").mass[0] == pytest.approx(density * volume, rel=1e-6)

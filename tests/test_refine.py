@@ -166,3 +166,31 @@ def test_the_error_reported_is_the_finely_traced_one_whatever_the_early_iteratio
     batch.positions = result.positions
     measured = refine(batch, target, RefineSettings(iterations=0)).chamfer
     np.testing.assert_allclose(result.chamfer, measured, rtol=1e-5)
+
+
+def _peak_acceleration(batch: LinkageBatch, positions: np.ndarray) -> np.ndarray:
+    """(B,) every design's largest joint acceleration per unit crank speed squared."""
+    from linkd.verify.analytic import joint_paths
+
+    peaks = []
+    for row in range(len(batch)):
+        moved = batch.subset([row])
+        moved.positions = positions[row : row + 1]
+        paths = joint_paths(to_mechanism(moved, 0, Similarity(), "mm"), 512)
+        second = np.roll(paths, 1, 1) - 2 * paths + np.roll(paths, -1, 1)
+        peaks.append(np.linalg.norm(second, axis=-1).max() * (512 / (2 * np.pi)) ** 2)
+    return np.array(peaks)
+
+
+def test_refinement_keeps_joint_accelerations_under_the_limit():
+    """Refined towards a curve that asks for sharp turns, designs trade a little accuracy for
+    joints that do not jerk: with a limit under what the free refinement reaches, every peak
+    acceleration ends lower, and not far past the limit."""
+    batch, target, _ = _perturbed(classic.stephenson_six_bar(), copies=4, noise=0.05)
+    free = refine(batch, target, RefineSettings(iterations=60, soft_acceleration=0.0))
+    reached = _peak_acceleration(batch, free.positions)
+    limit = 0.5 * reached.min()
+    held = refine(batch, target, RefineSettings(iterations=60, soft_acceleration=limit))
+    assert free.ok.all() and held.ok.all()
+    peaks = _peak_acceleration(batch, held.positions)
+    assert np.all(peaks < reached) and np.all(peaks < 1.5 * limit)

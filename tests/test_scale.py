@@ -68,3 +68,28 @@ def test_a_tenth_of_a_millimetre_mechanism_exports_and_verifies(tmp_path):
     mech = classic.crank_rocker().transformed(Similarity(0.03))
     _, report = export_verified(mech, tmp_path, {"mjcf", "stl"})
     assert report.passed, report.failed
+
+
+def test_a_millimetre_sized_model_weighs_its_parts_in_proportion(tmp_path):
+    """MuJoCo floors every body's mass and inertia (1e-9 kg, 1e-14 kg m^2): the parts of a
+    0.4 mm mechanism weigh less, so at its true density they would all weigh the same and turn
+    like flywheels. Its density is raised instead, so its bodies' masses keep the proportions
+    of the same mechanism built a metre across (inertias those times the square of the scale)."""
+    import mujoco
+
+    def bodies(mech, out):
+        result = export_mechanism(mech, out, {"mjcf", "stl"})
+        model = mujoco.MjModel.from_xml_path(str(out / "mechanism.xml"))
+        moving = model.body_dofnum > 0
+        density = result.sizes["density"]
+        return model.body_mass[moving] / density, model.body_inertia[moving] / density, density
+
+    big = classic.crank_rocker().transformed(Similarity(100.0))  # 0.4 m across
+    tiny = classic.crank_rocker().transformed(Similarity(0.1))
+    (tmp_path / "big").mkdir()
+    (tmp_path / "tiny").mkdir()
+    mass, inertia, density = bodies(big, tmp_path / "big")
+    tiny_mass, tiny_inertia, tiny_density = bodies(tiny, tmp_path / "tiny")
+    assert density == 1200 and tiny_density > 1200
+    np.testing.assert_allclose(tiny_mass / mass, 1e-9, rtol=1e-3)
+    np.testing.assert_allclose(tiny_inertia / inertia, 1e-15, rtol=1e-3)
