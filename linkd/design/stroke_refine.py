@@ -45,7 +45,8 @@ def refine_stroke(
 ) -> tuple[RefineResult, np.ndarray]:
     """Refine positions and crank ranges (K, 2) of `batch` on `goal`; returns the result (its
     `chamfer` is the score: Chamfer distance, or timing error when timed) and the ranges."""
-    s = replace(settings or RefineSettings(), max_radius=REACH)
+    # Paths here run over the stroke's crank range, not a whole turn: no acceleration limit.
+    s = replace(settings or RefineSettings(), max_radius=REACH, soft_acceleration=0.0)
     extra = np.stack([ranges[:, 0], ranges[:, 1] - ranges[:, 0]], 1)[:, None]
     riding = LinkageBatch(np.concatenate([batch.positions, extra], 1), batch.fixed, batch.valid,
                           batch.adjacency, batch.end_effector)  # fmt: skip
