@@ -278,7 +278,8 @@ class Objective:
 
 
 def _acceleration_excess(motion, limit: float) -> torch.Tensor:
-    """(k,) how far every joint's acceleration at a steady crank speed passes `limit`."""
+    """(k,) the squared share by which joints' accelerations at a steady crank speed pass
+    `limit`, averaged over the turn and summed over the joints."""
     t = motion.x.shape[-1]
     scale = (t / (2 * torch.pi)) ** 2
     ax = (torch.roll(motion.x, 1, -1) - 2 * motion.x + torch.roll(motion.x, -1, -1)) * scale
