@@ -31,7 +31,6 @@ from .mjcf import (
     build_mjcf,
     build_scene,
     density_scale,
-    floored,
     qpos_at,
     retimed,
     servo_gains,
@@ -172,9 +171,10 @@ def _write_model(
     volumes: dict,
     out: Path,
 ) -> Sizes:
-    """mechanism.xml (compiled once to size the crank servo from the model's own inertia), with
-    the model's mesh paths and volumes from `_write_meshes`; the sizes with the density used,
-    raised where MuJoCo's mass floors would distort a millimetre-sized model (`density_scale`)."""
+    """mechanism.xml, with the model's mesh paths and volumes from `_write_meshes`, compiled
+    to weigh its parts and to size the crank servo from its own inertia; returns the sizes with
+    the density used, raised where MuJoCo's mass floors would distort a millimetre-sized model
+    (`density_scale`)."""
     import mujoco
 
     path = out / MODEL
@@ -183,12 +183,9 @@ def _write_model(
         path.write_text(build_mjcf(mech, assembly, layout, s, meshes, volumes=volumes))
         return mujoco.MjModel.from_xml_path(str(path))
 
-    model = compiled(sizes)
-    if floored(model):
-        scale = density_scale(compiled(replace(sizes, density=sizes.density * PROBE_DENSITY)))
-        sizes = replace(sizes, density=sizes.density * scale)
-        model = compiled(sizes)
-    servo = servo_gains(model, mech)
+    scale = density_scale(compiled(replace(sizes, density=sizes.density * PROBE_DENSITY)))
+    sizes = replace(sizes, density=sizes.density * scale)
+    servo = servo_gains(compiled(sizes), mech)
     path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo, volumes))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
     return sizes

@@ -238,20 +238,13 @@ def build_mjcf(
     return ET.tostring(root, encoding="unicode") + "\n"
 
 
-def floored(model) -> bool:
-    """Whether a moving body of the compiled model sits at MuJoCo's mass or inertia floor."""
-    moving = model.body_dofnum > 0
-    return bool((model.body_mass[moving] <= MIN_MASS * (1 + 1e-9)).any()
-                or (model.body_inertia[moving] <= MIN_INERTIA * (1 + 1e-9)).any())  # fmt: skip
-
-
 def density_scale(probe) -> float:
     """The power of ten by which to raise the density so that every moving body's own mass and
-    inertia lie FLOOR_MARGIN above MuJoCo's floors, from the model compiled at PROBE_DENSITY
-    times the density. Millimetre-sized parts weigh less than the floors: raised to them, every
-    light part would weigh the same and turn like a flywheel, and the loops would need a step
-    tens of times finer. Scaling every mass alike changes no motion (the mechanism moves in the
-    plane, gravity along z, and the servo is sized from the model)."""
+    inertia lie FLOOR_MARGIN above MuJoCo's floors (1 where they do), from the model compiled at
+    PROBE_DENSITY times the density (about 10 ms). Millimetre-sized parts weigh less than the
+    floors: raised to them, every light part would weigh the same and turn like a flywheel, and
+    the loops would need a step tens of times finer. Scaling every mass alike changes no motion
+    (the mechanism moves in the plane, gravity along z, and the servo is sized from the model)."""
     moving = probe.body_dofnum > 0
     mass = probe.body_mass[moving].min() / PROBE_DENSITY
     inertia = probe.body_inertia[moving].min() / PROBE_DENSITY
