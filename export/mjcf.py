@@ -26,6 +26,7 @@ from __future__ import annotations
 import itertools
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from .layers import Layout, Plate, convex_hull, plate_points, plates, post_spans
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
+
+if TYPE_CHECKING:
+    import mujoco
 
 TIMESTEP = 2.5e-4  # s, the default
 CCD_TOLERANCE = 1e-6  # m, MuJoCo's own for the distance between convex meshes
@@ -238,7 +242,7 @@ def build_mjcf(
     return ET.tostring(root, encoding="unicode") + "\n"
 
 
-def density_scale(probe) -> float:
+def density_scale(probe: mujoco.MjModel) -> float:
     """The power of ten by which to raise the density so that every moving body's own mass and
     inertia lie FLOOR_MARGIN above MuJoCo's floors (1 where they do), from the model compiled at
     PROBE_DENSITY times the density (about 10 ms). Millimetre-sized parts weigh less than the
@@ -302,7 +306,7 @@ def qpos_at(model, mech: Mechanism, angles: np.ndarray) -> np.ndarray:
     return qpos
 
 
-def servo_gains(model, mech: Mechanism, n_angles: int = 64) -> Servo:
+def servo_gains(model: mujoco.MjModel, mech: Mechanism, n_angles: int = 64) -> Servo:
     """Crank servo and rotor inertia from the largest inertia the crank drives in a revolution.
 
     That inertia is max v' M v over the cycle, v being the joint velocities per unit crank
