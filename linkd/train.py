@@ -56,6 +56,7 @@ class TrainConfig:
     threads: int = 0  # torch CPU threads per process; 0 keeps torch's default
     init: str | None = None  # start from this checkpoint's weights (see `warm_start`)
     sub_mechanisms: float = 0.0  # share of examples replaced by one of their sub-mechanisms
+    loader_workers: int = 0  # processes preparing batches ahead (0: the training process)
 
 
 PRESETS = {
@@ -85,6 +86,13 @@ PRESETS = {
         draws=4, eval_every=10_000, eval_curves=500, checkpoint_every=2000, device="cuda",
         bf16=True,
     ),
+    # Continues a `cpu-sub` run (--init) on one GPU: the same model, 16 times the batch, its
+    # sub-mechanism examples prepared by loader workers.
+    "gpu-sub": TrainConfig(
+        model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5),
+        batch_size=1024, max_steps=6000, lr=5e-4, min_lr=2e-5, warmup=200, eval_every=0,
+        checkpoint_every=1000, device="cuda", sub_mechanisms=0.5, loader_workers=12,
+    ),
     "tiny": TrainConfig(
         model=LinkDConfig(dim=32, layers=1, heads=2, encoder_layers=1, head_widths=(32, 16),
                           head_cond=16),
@@ -110,6 +118,35 @@ def epoch_batches(n_nodes: torch.Tensor, batch: int, bucket: int, seed: int) -> 
         batches += [group[k : k + batch] for k in range(0, len(group) - batch + 1, batch)]
     perm = torch.randperm(len(batches), generator=g).tolist()
     return [batches[k] for k in perm]
+
+
+class StepBatches(torch.utils.data.Dataset):
+    """Item `step` is that step's prepared batch (this rank's share): its graphs and curves
+    after sub-mechanisms, augmentation and resampling. It depends on the step alone, so a
+    run is the same whether the training process prepares it or loader workers do (on a
+    GPU the sub-mechanisms' kinematics, on the CPU, would otherwise starve the device)."""
+
+    def __init__(self, data: TrainData, c: TrainConfig, rank: int, world: int) -> None:
+        self.data, self.c, self.rank, self.world = data, c, rank, world
+        self.per_epoch = len(epoch_batches(data.n_nodes, c.batch_size, c.bucket, c.seed))
+        self.epoch, self.batches = -1, []
+
+    def __len__(self) -> int:
+        return self.c.max_steps
+
+    def __getitem__(self, step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        c, data = self.c, self.data
+        if step // self.per_epoch != self.epoch:
+            self.epoch = step // self.per_epoch
+            self.batches = epoch_batches(data.n_nodes, c.batch_size, c.bucket, c.seed + self.epoch)
+        index = self.batches[step % self.per_epoch][self.rank :: self.world]
+        generator = torch.Generator().manual_seed(step_seed(c, step, self.rank))
+        length = min(int(data.n_nodes[index].max()) + 1, data.graphs.shape[1])
+        graphs, curves = data.graphs[index, :length], data.curves[index]
+        if c.sub_mechanisms > 0:
+            graphs, curves = sub_mechanism_examples(graphs, curves, generator, c.sub_mechanisms)
+        graphs, curves = augment(graphs, curves, generator, c.reflect, c.rotate)
+        return graphs, conditioning(curves, generator)
 
 
 def lr_at(step: int, c: TrainConfig) -> float:
@@ -186,23 +223,15 @@ def train(
         net = torch.nn.parallel.DistributedDataParallel(model)
     log = Logger(out / "log.jsonl", rank == 0, progress, c.max_steps, step)
 
-    per_epoch = len(epoch_batches(data.n_nodes, c.batch_size, c.bucket, c.seed))
-    batches, epoch = [], -1
-    started = time.time() - seconds
     end = min(c.max_steps, stop_at or c.max_steps)
-    while step < end:
-        if step // per_epoch != epoch:
-            epoch = step // per_epoch
-            batches = epoch_batches(data.n_nodes, c.batch_size, c.bucket, c.seed + epoch)
-        index = batches[step % per_epoch][rank::world]
-        generator = torch.Generator().manual_seed(step_seed(c, step, rank))
+    loader = torch.utils.data.DataLoader(
+        StepBatches(data, c, rank, world), batch_size=None, sampler=range(step, end),
+        num_workers=c.loader_workers, prefetch_factor=4 if c.loader_workers else None,
+        pin_memory=device.startswith("cuda"),
+    )  # fmt: skip
+    started = time.time() - seconds
+    for graphs, curves in loader:
         torch.manual_seed(step_seed(c, step, rank))
-        length = min(int(data.n_nodes[index].max()) + 1, data.graphs.shape[1])
-        graphs, curves = data.graphs[index, :length], data.curves[index]
-        if c.sub_mechanisms > 0:
-            graphs, curves = sub_mechanism_examples(graphs, curves, generator, c.sub_mechanisms)
-        graphs, curves = augment(graphs, curves, generator, c.reflect, c.rotate)
-        curves = conditioning(curves, generator)
         with torch.autocast(device.split(":")[0], torch.bfloat16, enabled=c.bf16):
             loss, parts = net(graphs.to(device), curves.to(device), c.draws)
         opt.zero_grad(set_to_none=True)

@@ -129,6 +129,13 @@ def test_training_is_deterministic_and_resumes_exactly(data, tmp_path):
     assert not torch.equal(weights(other), weights(straight))
 
 
+def test_loader_workers_prepare_the_same_batches(data, tmp_path):
+    inline = train(tiny(tmp_path / "a", sub_mechanisms=0.5), data, data, progress=False)
+    ahead = train(tiny(tmp_path / "b", sub_mechanisms=0.5, loader_workers=2), data, data,
+                  progress=False)  # fmt: skip
+    assert torch.equal(weights(inline), weights(ahead))
+
+
 def test_training_lowers_the_loss(data, tmp_path):
     torch.manual_seed(0)
     before = LinkD(PRESETS["tiny"].model).eval()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "cuda", "tiny")
+PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "gpu-sub", "cuda", "tiny")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,6 +41,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         default=0,
         help="torch CPU threads per process (default: torch's choice)",
     )
+    p.add_argument(
+        "--loader-workers",
+        type=int,
+        help="processes preparing batches ahead (default: the preset's; 0: none)",
+    )
     p.add_argument("--stop-at", type=int, help="pause after this step (resume later)")
     p.add_argument("--no-resume", action="store_true", help="start over even if OUT/last.pt exists")
     p.set_defaults(run=run)
@@ -61,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     overrides = {
         "max_steps": args.steps, "batch_size": args.batch_size, "lr": args.lr,
         "eval_every": args.eval_every, "device": args.device, "init": args.init,
+        "loader_workers": args.loader_workers,
     }  # fmt: skip
     preset = CONFIGS[args.preset]
     if args.cross_attention is not None:
