@@ -87,17 +87,26 @@ def dyad(x1: Any, y1: Any, x2: Any, y2: Any, r1sq: Any, r2sq: Any, side: Any, op
 
     Returns the joint's coordinates and the squared sine of the angle between its two links
     (the transmission angle); that value is negative where the two circles do not meet.
+    """
+    return dyad_terms(x1, y1, x2, y2, r1sq, r2sq, side, ops)[:3]
+
+
+def dyad_terms(x1: Any, y1: Any, x2: Any, y2: Any, r1sq: Any, r2sq: Any, side: Any, ops: Any):
+    """`dyad`'s x, y, sin^2, then the terms its gradient is made of (`linkd.dyad_chain`).
+
     r1sq, r2sq and side are constant over the angles, so dividing by them is cheap: one
     full-size division per dyad.
     """
     dx, dy = x2 - x1, y2 - y1
-    d2 = ops.clamp_min(dx * dx + dy * dy, EPS)
+    d2raw = dx * dx + dy * dy
+    d2 = ops.clamp_min(d2raw, EPS)
     inv = 1 / d2
     a = 0.5 + (0.5 * (r1sq - r2sq)) * inv  # foot of the joint along p1->p2, as a fraction
     h2 = r1sq * inv - a * a  # squared height off the line p1->p2, as a fraction of |p1p2|^2
-    h = side * ops.sqrt(ops.clamp_min(h2, EPS))
+    root = ops.sqrt(ops.clamp_min(h2, EPS))
+    h = side * root
     sin2 = h2 * d2 * d2 * (1 / ops.clamp_min(r1sq * r2sq, EPS))
-    return x1 + a * dx - h * dy, y1 + a * dy + h * dx, sin2
+    return x1 + a * dx - h * dy, y1 + a * dy + h * dx, sin2, (dx, dy, d2raw, d2, inv, a, h2, root)
 
 
 def assembly_geometry(positions: Any, plan: Plan, ops: SimpleNamespace) -> tuple:
@@ -182,25 +191,29 @@ def trace(
     xs[:, 1], ys[:, 1] = crank_path(positions[:, 0], positions[:, 1], angles, ops)
     xs[:, n], ys[:, n] = xs[:, 1], ys[:, 1]
     r1sq, r2sq, side = assembly_geometry(extended, plan, ops)
-    fusable = compiled and not full and not getattr(positions, "requires_grad", False)
-    step = _compiled_step() if fusable else None
     # (S, 3, B) parents and node of every step, converted once.
     order = np.concatenate([plan.dyad_parents, plan.dyad_node[..., None]], 2).transpose(1, 2, 0)
     order = ops.index(np.ascontiguousarray(order), xs)
-    margins, sin2 = [], []
-    for s in range(plan.dyad_node.shape[1]):
-        args = (xs, ys, *order[s], r1sq[:, s, None], r2sq[:, s, None], side[:, s, None])
-        if step is not None:
-            margins.append(step(*args))
-            continue
-        s2 = _step(*args, ops)
-        margins.append(ops.amin(s2, (1,)))
-        if full:
-            sin2.append(s2)
-    xs, ys = xs[:, :n], ys[:, :n]
-    if not margins:
-        return Motion(xs, ys, ops.materialise(ops.asarray(1.0, positions), (bsz, 1)))
+    steps = plan.dyad_node.shape[1]
+    if not steps:
+        return Motion(xs[:, :n], ys[:, :n], ops.materialise(ops.asarray(1.0, positions), (bsz, 1)))
+    if getattr(positions, "requires_grad", False):
+        from linkd.dyad_chain import DyadChain
+
+        xs, ys, sin2 = DyadChain.apply(xs, ys, r1sq, r2sq, side, order)
+        margin = sin2.amin(2)
+    else:
+        step = _compiled_step() if compiled and not full else None
+        margins, rows = [], []
+        for s in range(steps):
+            args = (xs, ys, *order[s], r1sq[:, s, None], r2sq[:, s, None], side[:, s, None])
+            if step is not None:
+                margins.append(step(*args))
+                continue
+            rows.append(_step(*args, ops))
+            margins.append(ops.amin(rows[-1], (1,)))
+        margin, sin2 = ops.stack(margins, 1), ops.stack(rows, 1) if full else None
     unused = ops.mask(plan.dyad_node == n, positions)
-    step_margin = ops.where(unused, 1.0, ops.stack(margins, 1))
-    full_sin2 = ops.where(unused[:, :, None], 1.0, ops.stack(sin2, 1)) if full else None
-    return Motion(xs, ys, step_margin, full_sin2)
+    step_margin = ops.where(unused, 1.0, margin)
+    full_sin2 = ops.where(unused[:, :, None], 1.0, sin2) if full else None
+    return Motion(xs[:, :n], ys[:, :n], step_margin, full_sin2)

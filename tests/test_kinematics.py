@@ -89,7 +89,7 @@ def test_gradient_matches_finite_differences():
 
 def test_gradient_of_a_padded_batch_matches_finite_differences():
     # Several dyads deep, padded plans (unused steps), paths, transmissions and margins at once:
-    # the reverse walk through the steps (`linkd.dyad_grad`) against finite differences.
+    # the reverse walk through the steps (`linkd.dyad_chain`) against finite differences.
     mechs = [classic.jansen_leg(), classic.crank_rocker(), classic.stephenson_six_bar()]
     batch = LinkageBatch.from_mechanisms(mechs)
     plan = assembly_plan(batch.adjacency, batch.fixed, batch.valid)
