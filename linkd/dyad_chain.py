@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from linkd.kinematics import EPS, _torch_ops, dyad_terms
+from linkd.kinematics import EPS, dyad_terms, ops_for
 
 
 class DyadChain(torch.autograd.Function):
@@ -20,7 +20,7 @@ class DyadChain(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, xs, ys, r1sq, r2sq, side, order):
-        ops = _torch_ops()
+        ops = ops_for(xs)
         xs, ys = xs.clone(), ys.clone()
         b = torch.arange(xs.shape[0], device=xs.device)
         sin2, terms = [], []

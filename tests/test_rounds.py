@@ -126,8 +126,8 @@ def _padded_crank_rocker(count: int, joints: int = 20) -> LinkageBatch:
 
 
 def test_a_longer_budget_searches_wider_unless_told():
-    assert search_width(30, None, None) == (5, 1024, 48)  # the defaults
-    assert search_width(120, None, None) == (29, 4096, 96)  # rounds until the deadline
+    assert search_width(30, None, None) == (6, 1024, 48)  # the defaults
+    assert search_width(120, None, None) == (30, 4096, 96)  # rounds until the deadline
     assert search_width(120, 1, 10, 4) == (1, 10, 4)
     # An open or timed stroke has one round and refines three times as many designs in it.
     assert search_width(30, None, None, stroke=True) == (1, 1024, 144)

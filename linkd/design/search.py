@@ -55,8 +55,9 @@ if TYPE_CHECKING:
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 FINE_POINTS = 1000  # of a drawn loop's target in the polish: a 200-point one, filtered at half
 # its spacing, rounds corners the user's own points keep
-DEFAULT_ROUNDS = 5  # refinement rounds in the default budget: the first and four that grow the
-# best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s)
+DEFAULT_ROUNDS = 6  # refinement rounds in the default budget: the first and five that grow the
+# best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s; six,
+# once the dyads' backward was written out, 0.0244 in 17.5 s)
 ROUND_ITERATIONS = 130  # L-BFGS iterations of a later round's copies in the default budget
 ROUND_ORDERED_ITERATIONS = 50  # of which the first, every copy, at the coarse angles
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
