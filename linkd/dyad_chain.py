@@ -58,10 +58,7 @@ def dyad_vjp(terms: tuple, r1sq, r2sq, side, gx, gy, gs) -> tuple:
     x = x1 + a dx - h dy, y = y1 + a dy + h dx, sin2 = h2 d2^2 q, given those of x, y, sin2;
     where a = 1/2 + (r1sq - r2sq) / (2 d2), h2 = r1sq / d2 - a^2, h = side sqrt(max(h2, EPS)),
     d2 = max(dx^2 + dy^2, EPS), q = 1 / max(r1sq r2sq, EPS)."""
-    dx, dy, d2raw, d2, inv, a, h2, root = terms
-    rr = r1sq * r2sq
-    q = 1 / rr.clamp_min(EPS)
-    h = side * root
+    dx, dy, d2raw, d2, inv, a, h2, root, h, q = terms
     ga = gx * dx + gy * dy
     gdx = gx * a + gy * h
     gdy = gy * a - gx * h
@@ -72,7 +69,7 @@ def dyad_vjp(terms: tuple, r1sq, r2sq, side, gx, gy, gs) -> tuple:
     ginv = gh2 * r1sq + ga * (0.5 * (r1sq - r2sq))
     gd2 = torch.where(d2raw > EPS, 2 * gsd * h2 * q - ginv * inv * inv, 0.0)
     gdx, gdy = gdx + 2 * dx * gd2, gdy + 2 * dy * gd2
-    gq = torch.where(rr > EPS, -(gsd * d2 * h2).sum(1, keepdim=True) * q * q, 0.0)
+    gq = torch.where(r1sq * r2sq > EPS, -(gsd * d2 * h2).sum(1, keepdim=True) * q * q, 0.0)
     gr1 = ((gh2 + 0.5 * ga) * inv).sum(1, keepdim=True) + gq * r2sq
     gr2 = (-0.5 * ga * inv).sum(1, keepdim=True) + gq * r1sq
     return gx - gdx, gy - gdy, gdx, gdy, gr1[:, 0], gr2[:, 0]

@@ -105,8 +105,9 @@ def dyad_terms(x1: Any, y1: Any, x2: Any, y2: Any, r1sq: Any, r2sq: Any, side: A
     h2 = r1sq * inv - a * a  # squared height off the line p1->p2, as a fraction of |p1p2|^2
     root = ops.sqrt(ops.clamp_min(h2, EPS))
     h = side * root
-    sin2 = h2 * d2 * d2 * (1 / ops.clamp_min(r1sq * r2sq, EPS))
-    return x1 + a * dx - h * dy, y1 + a * dy + h * dx, sin2, (dx, dy, d2raw, d2, inv, a, h2, root)
+    q = 1 / ops.clamp_min(r1sq * r2sq, EPS)
+    terms = (dx, dy, d2raw, d2, inv, a, h2, root, h, q)
+    return x1 + a * dx - h * dy, y1 + a * dy + h * dx, h2 * d2 * d2 * q, terms
 
 
 def assembly_geometry(positions: Any, plan: Plan, ops: SimpleNamespace) -> tuple:

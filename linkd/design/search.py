@@ -80,9 +80,10 @@ def search_width(
     stroke: bool = False,
 ) -> tuple[int, int, int]:
     """Refinement rounds, atlas paths and designs refined per round for the time budget, where
-    not given: five rounds, 1024 paths and 48 designs for the default 30 s; for every further
-    30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones around the
-    same few designs do not; each round also searches around more designs, `around_width`)
+    not given: DEFAULT_ROUNDS rounds, 1024 paths and 48 designs for the default 30 s; for every
+    further 30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones
+    around the same few designs do not; each round also searches around more designs,
+    `around_width`)
     and up to eight rounds more, as many as the budget's deadline leaves time for. The deadline
     also stops refinement early on a slow or busy machine. An open or timed `stroke` has one
     round (searching around the best works on closed loops) and spends the later rounds' time
