@@ -6,7 +6,7 @@ import pytest
 from linkd.curves import resample, write_curve
 from linkd.design.bench import curve_files, run_bench, summary_table
 from linkd.design.pipeline import DesignOptions
-from linkd.design.select import end_effector_path
+from linkd.design.select import curve_error, end_effector_path, sampling_floor
 from linkd.errors import InputError
 from linkd.generator import GeneratorSettings, generate
 from linkd.graph import from_graph
@@ -47,6 +47,8 @@ def test_bench_reports_validity_error_and_time_per_curve(tmp_path):
         assert 0 <= row["chamfer"] < 1 and 0 <= row["chamfer_200"] < 1
         assert 5 <= row["nodes"] <= 6 and row["seconds"] > 0
     assert "verified        100.0%" in summary_table(total)
+    assert all(0 < row["floor"] < row["chamfer"] for row in results["curves"])
+    assert total["floor_mean"] == pytest.approx(np.mean([r["floor"] for r in results["curves"]]))
     assert total["found_by"] == {"model": 2}  # the only source here
     skips = sum(sum(row["skipped"].values()) for row in results["curves"])
     assert sum(total["skipped"].values()) == skips and total["best_skipped"] <= min(skips, 2)
@@ -72,3 +74,13 @@ def test_bench_counts_a_refused_curve_and_goes_on(tmp_path):
     assert [row["valid"] for row in results["curves"]] == [False, False] and len(lines) == 2
     assert "across" in results["curves"][0]["reason"] and "across" in lines[0]
     assert results["total"]["valid_rate"] == 0.0 and results["total"]["chamfer_mean"] is None
+
+
+def test_the_sampling_floor_is_what_an_exact_trace_scores():
+    """Both curves resampled to 2000 points from their own starts: a circle traced exactly but
+    from elsewhere scores a quarter of the spacing each way on average, half in all."""
+    turn = np.linspace(0, 2 * np.pi, 500, endpoint=False)
+    circle = np.stack([np.cos(turn), np.sin(turn)], 1)
+    assert sampling_floor(circle) == pytest.approx(0.5 * 2 * np.pi / 2000, rel=0.1)
+    assert curve_error(circle, circle) == pytest.approx(0, abs=1e-12)  # from its own start
+    assert sampling_floor(3 * circle + 7) == pytest.approx(sampling_floor(circle), rel=1e-6)

@@ -36,7 +36,7 @@ from .output import SKIP_REASONS
 from .pipeline import DesignOptions, design
 from .propose import Proposer
 from .search import search_width
-from .select import end_effector_path
+from .select import end_effector_path, sampling_floor
 
 SETUPS = ("plain", "user", "constrained", "no-motor")
 USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])
@@ -173,22 +173,27 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "nodes": figures.get("nodes"),
         "crank_range_deg": figures.get("crank_range_deg"),
         "deviation": None,
+        "floor": None,
         "timing_error": figures.get("timing_error"),
         "seconds": seconds,
         "found_by": outcome.report["search"].get("found_by"),
         "sources": outcome.report["search"].get("sources", {}),
         "polish": outcome.report["search"].get("polish", {}),
+        "rounds_run": outcome.report["search"].get("rounds_run"),
+        "default_search": outcome.report["search"].get("default_search"),
         "skipped": dict(outcome.report["search"].get("skipped", {})),
         "timings": dict(outcome.report.get("timings", {})),
     }
     if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
         points, _ = read_path(file, "open")
         row["deviation"] = stroke_deviation(outcome.design.mechanism, points)
+    elif curve.get("path") == "closed" and not curve.get("timed"):
+        row["floor"] = sampling_floor(read_path(file, "closed")[0])
     return row
 
 
 def _refused_row(file: Path, reason: str, seconds: float) -> dict:
-    keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation",
+    keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation", "floor",
             "timing_error", "found_by")  # fmt: skip
     return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
             "verified": False, "seconds": seconds, "sources": {}, "skipped": {},
@@ -218,6 +223,7 @@ def totals(rows: list[dict]) -> dict:
         "chamfer_mean": stat("chamfer", np.mean),
         "chamfer_median": stat("chamfer", np.median),
         "chamfer_200_mean": stat("chamfer_200", np.mean),
+        "floor_mean": stat("floor", np.mean),
         "nodes_mean": stat("nodes", np.mean),
         "open": sum(r["path"] == "open" for r in rows),
         "deviation_mean": stat("deviation", np.mean),
@@ -310,7 +316,8 @@ def summary_table(total: dict) -> str:
         ("valid", _fmt(t["valid_rate"], ".1%")),
         ("verified", _fmt(t["verified_rate"], ".1%")),
         ("chamfer (2000)", f"mean {_fmt(t['chamfer_mean'], '.4f')}, "
-                           f"median {_fmt(t['chamfer_median'], '.4f')}"),
+                           f"median {_fmt(t['chamfer_median'], '.4f')}; an exact trace of the "
+                           f"closed curves: {_fmt(t['floor_mean'], '.4f')}"),
         ("chamfer (200)", f"mean {_fmt(t['chamfer_200_mean'], '.4f')}"),
         ("joints", f"mean {_fmt(t['nodes_mean'], '.1f')}"),
         ("open paths", f"{t['open']}, stroke deviation mean {_fmt(t['deviation_mean'], '.2%')}, "

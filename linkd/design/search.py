@@ -52,6 +52,7 @@ if TYPE_CHECKING:
 
     from .pipeline import DesignOptions
 
+BUDGET_STEP = 30.0  # seconds: the default budget, the unit a longer one widens the search by
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 FINE_POINTS = 1000  # of a drawn loop's target in the polish: a 200-point one, filtered at half
 # its spacing, rounds corners the user's own points keep
@@ -64,6 +65,9 @@ AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 POLISH = 8  # best designs refined again at the end at finer angles, for each 30 s of the budget
 POLISH_ANGLES = 1024
 POLISH_ITERATIONS = 200
+STALL_ROUNDS = 4  # a longer budget's rounds end after this many that gain under STALL_GAIN
+STALL_GAIN = 0.005  # (of the best error): the polish then has their time
+POLISH_RANGE = 2.0  # a longer budget polishes down the ranking to this many times the best error
 POLISH_SHARE = 0.1  # of the budget kept from the rounds for the polish (a long budget's rounds
 # would run to the deadline and leave it none)
 
@@ -103,20 +107,61 @@ def around_width(time_budget: float, around: int | None) -> int:
 
 def budget_steps(time_budget: float) -> int:
     """The budget in units of the default 30 s (at least one): what the search widens by."""
-    return max(1, round(time_budget / 30))
+    return max(1, round(time_budget / BUDGET_STEP))
 
 
 def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
            stages: Stages, deadline: float, report: dict) -> Candidates:  # fmt: skip
     """Propose, place and refine (`o`: the DesignOptions; `inner`: the constraints in the
     target's frame); each candidate's `chamfer` is its latest curve error (on an open or timed
-    target: its stroke's Chamfer distance, or its timing error). Fills `report`."""
+    target: its stroke's Chamfer distance, or its timing error). Fills `report`.
+
+    A longer budget on a drawn loop first runs the default budget's search (the designs a
+    default run with the same seed finds) and then its own wider one, and polishes the best of
+    both: a wide search settles in different basins, and now and then in worse ones, so a
+    longer budget could otherwise deliver a worse design than the default."""
     stroke = not goal.closed or goal.timed
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
-    rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
-                                                     o.refine_count, stroke)  # fmt: skip
-    report["rounds"], report["refine_count"] = rounds, refine_count
-    around_count = around_width(o.time_budget, o.around)
+    graphs = _proposals(proposer, target, o, stages, report)
+    polishing = o.refine and not stroke
+    rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
+    first = None
+    if polishing and o.rounds is None and budget_steps(o.time_budget) > 1:
+        # The default run's own deadline: as far before the wide search's as its budget is
+        # shorter, less the polish's share of the difference.
+        end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
+        short = replace(o, time_budget=BUDGET_STEP)
+        first = _explore(goal, target, inner, short, graphs, stages, end, {})
+        report["default_search"] = {"best": float(np.min(first[0].chamfer))}
+    candidates, placed = _explore(goal, target, inner, o, graphs, stages, rounds_end, report)
+    if first is not None:
+        candidates, placed = merged(first[0], candidates), np.concatenate([first[1], placed])
+    if goal.closed:  # a closed timed path: its phase is measured again on delivery
+        candidates.ranges = None
+    report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
+    used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
+    report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
+    if polishing and time.monotonic() < deadline:
+        with stages.stage("polish", "refining the best designs at finer crank angles") as note:
+            count = POLISH * budget_steps(o.time_budget)
+            settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
+            polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
+                             ordered_iterations=0, ordered_weights=(0.0,), keep=count)  # fmt: skip
+            fine = target if goal.fine is None else goal.fine
+            refine_finely = _refiner(goal, fine, stroke, polish, inner, deadline)
+            until = deadline if budget_steps(o.time_budget) > 1 else None
+            done = _polish(candidates, count, o.per_topology, refine_finely,
+                           _progress(stages, count, polish), until)  # fmt: skip
+            report["polish"] = done
+            if done["designs"]:
+                note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
+                     f"{done['after']:.4f}")  # fmt: skip
+    return candidates
+
+
+def _proposals(proposer: Proposer | None, target: np.ndarray, o: DesignOptions,
+               stages: Stages, report: dict) -> list:  # fmt: skip
+    """The proposer's designs for the target (LinkD's unless `o` or `proposer` says other)."""
     with stages.stage("propose", f"sampling {o.candidates} designs") as note:
         report["proposer"] = o.proposer
         if proposer is None and o.proposer == "random":
@@ -128,6 +173,21 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
             report["model"], report["guidance"] = o.model or "shipped", o.guidance
         graphs = propose(proposer, target, o.candidates, o.rotations, o.seed)
         note(f"{len(graphs)} designs")
+    report["proposed"] = len(graphs)
+    return graphs
+
+
+def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOptions,
+             graphs: list, stages: Stages, rounds_end: float,
+             report: dict) -> tuple[Candidates, np.ndarray]:  # fmt: skip
+    """The proposed `graphs` and the atlas's paths placed on the target, the best refined, and
+    the rounds that grow them, as wide as `o`'s budget asks and until `rounds_end`: the
+    candidates and their errors as placed, before refinement."""
+    stroke = not goal.closed or goal.timed
+    rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
+                                                     o.refine_count, stroke)  # fmt: skip
+    report["rounds"], report["refine_count"] = rounds, refine_count
+    around_count = around_width(o.time_budget, o.around)
     batches = [LinkageBatch.from_graphs(graphs)]
     if o.atlas and not stroke:
         with stages.stage("atlas", "looking the shape up in the atlas") as note:
@@ -138,7 +198,6 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                 batches.append(atlas.query(target, atlas_paths))
                 note(f"{len(batches[-1])} paths of {len(atlas):,}")
     with stages.stage("align", "placing designs on the curve") as note:
-        report["proposed"] = len(graphs)
         report["valid"] = int(validate(batches[0]).valid.sum())
         if o.every_joint:
             batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints)
@@ -167,10 +226,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         raise NoDesign(f"none of the {len(graphs)} sampled designs is a valid mechanism")
     placed = candidates.chamfer.copy()
     candidates.chamfer = candidates.chamfer.copy()
-    report["refined"] = 0
-    polishing = o.refine and not stroke
     settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-    rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
     if o.refine:
         refine_rows = _refiner(goal, target, stroke, settings, inner, rounds_end)
         with stages.stage("refine", "refining the best designs") as note:
@@ -191,9 +247,12 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                                                              ROUND_ORDERED_ITERATIONS))  # fmt: skip
         refine_nearby = _refiner(goal, target, stroke, nearby_settings, inner, rounds_end)
         buildable = _buildable()
+        best, stalled = np.min(candidates.chamfer), 0
+        report["rounds_run"] = 1
         for _ in range(rounds - 1):
-            if time.monotonic() > rounds_end:
+            if time.monotonic() > rounds_end or stalled == STALL_ROUNDS:
                 break
+            report["rounds_run"] += 1
             with stages.stage("round", "growing the best designs by a joint") as note:
                 nearby = around(candidates, around_count, o.around_copies, o.around_spread,
                                 o.seed + len(candidates), buildable, inner.max_joints)  # fmt: skip
@@ -212,47 +271,43 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
                 done = refine_nearby(candidates, rows, progress)
                 note(f"{len(rows)} designs, {done} iterations, "
                      f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
-        report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
-    if goal.closed:  # a closed timed path: its phase is measured again on delivery
-        candidates.ranges = None
-    used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
-    report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
-    if polishing and time.monotonic() < deadline:
-        with stages.stage("polish", "refining the best designs at finer crank angles") as note:
-            count = POLISH * budget_steps(o.time_budget)
-            polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
-                             ordered_iterations=0, ordered_weights=(0.0,), keep=count)  # fmt: skip
-            fine = target if goal.fine is None else goal.fine
-            refine_finely = _refiner(goal, fine, stroke, polish, inner, deadline)
-            done = _polish(candidates, count, o.per_topology, refine_finely,
-                           _progress(stages, count, polish))  # fmt: skip
-            report["polish"] = done
-            if done["designs"]:
-                note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
-                     f"{done['after']:.4f}")  # fmt: skip
-    return candidates
+            if budget_steps(o.time_budget) > 1:  # the default's rounds are few: all run
+                gained = np.min(candidates.chamfer) < (1 - STALL_GAIN) * best
+                best, stalled = min(best, np.min(candidates.chamfer)), 0 if gained else stalled + 1
+    return candidates, placed
 
 
-def _polish(
-    candidates: Candidates, count: int, per_topology: int, refine_finely: Callable, progress
-) -> dict:
+def _polish(candidates: Candidates, count: int, per_topology: int, refine_finely: Callable,
+            progress, until: float | None = None) -> dict:  # fmt: skip
     """Refine the best `count` candidates (at most `per_topology` of a topology) once more, at
-    the finer crank angles of `refine_finely`. A path traced at a few hundred angles cuts the
-    corners where the end effector moves fast, so refinement can settle where the polyline
-    fits but the path does not; at finer angles it moves on. A design that misses the hard
-    limits at the finer angles keeps its place and error. Returns what it did, for the
-    report."""
+    the finer crank angles of `refine_finely`; with `until` (a `time.monotonic()` value), the
+    next `count` refined ones after them and so on down the ranking while time remains, as
+    far as POLISH_RANGE times the best error. A path traced at a few hundred angles cuts the corners
+    where the end effector moves fast, so refinement can settle where the polyline fits but
+    the path does not; at finer angles it moves on, and a design ranked lower at the coarse
+    angles may end first. A design that misses the hard limits at the finer angles keeps its
+    place and error. Returns what it did, for the report."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
-    rows = np.array(diverse_best(candidates.batch, order, count, per_topology), int)
-    if len(rows) == 0:
+    if until is not None and len(order):
+        near = candidates.chamfer[order] <= POLISH_RANGE * candidates.chamfer[order[0]]
+        order = order[near & candidates.refined[order]]
+    ranking = diverse_best(candidates.batch, order, count if until is None else len(order),
+                           per_topology)  # fmt: skip
+    if not ranking:
         return {"designs": 0}
-    before = candidates.chamfer[rows].copy()
-    refine_finely(candidates, rows, progress)
-    lost = ~np.isfinite(candidates.chamfer[rows])
-    candidates.chamfer[rows[lost]] = before[lost]  # positions are kept where refinement fails
-    return {"designs": len(rows), "before": float(before.min()),
-            "after": float(candidates.chamfer[rows].min())}  # fmt: skip
+    before, done = float(candidates.chamfer[ranking[0]]), []
+    for start in range(0, len(ranking), count):
+        rows = np.array(ranking[start : start + count], int)
+        errors = candidates.chamfer[rows].copy()
+        refine_finely(candidates, rows, progress)
+        lost = ~np.isfinite(candidates.chamfer[rows])
+        candidates.chamfer[rows[lost]] = errors[lost]  # positions are kept where it fails
+        done.extend(rows)
+        if until is None or time.monotonic() >= until:
+            break
+    return {"designs": len(done), "before": before,
+            "after": float(candidates.chamfer[done].min())}  # fmt: skip
 
 
 def _refiner(

@@ -112,6 +112,18 @@ def curve_error(path: np.ndarray, target: np.ndarray, points: int = CHAMFER_POIN
     return chamfer(a, b)
 
 
+def sampling_floor(target: np.ndarray, starts: int = 8, points: int = CHAMFER_POINTS) -> float:
+    """The curve error of the closed target itself, traced finely from `starts` other points
+    along it, each a different fraction of the resampling's spacing past one of its points:
+    what a design that traces it exactly scores on average, the share of every figure that is
+    the resampling's, not the fit's."""
+    fine = 64  # finely traced points per resampled one
+    dense = resample(target, fine * points)
+    k = np.arange(starts)
+    shifts = k * len(dense) // starts + ((k + 0.5) * fine / starts).astype(int)
+    return float(np.mean([curve_error(np.roll(dense, -s, 0), target, points) for s in shifts]))
+
+
 def measure(mech: Mechanism, target: np.ndarray, timed: bool = False) -> Measures:
     """Curve error and buildability figures of a design against the target, both in one frame:
     against the stroke of its crank range when it has one, and the timing error when `timed`."""

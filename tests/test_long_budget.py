@@ -1,0 +1,66 @@
+"""A longer budget's search (linkd.design.search): the default budget's search inside it, and a
+polish that goes on down the ranking while time remains."""
+
+import time
+
+import numpy as np
+from test_design import QUICK, pool_proposer
+from test_polish import FINE, _coarsely_refined, _unit_crank_rocker
+
+from linkd.constraints import Constraints
+from linkd.design import search as searching
+from linkd.design.pipeline import DesignOptions
+from linkd.design.search import _polish, _refiner, search
+from linkd.design.stages import Stages
+from linkd.design.stroke import Goal
+
+
+def _search(pool, budget: float, seconds: float) -> tuple:
+    """The candidates and report of a search for a crank-rocker's curve with `budget`, its
+    deadline `seconds` from now."""
+    options = DesignOptions(candidates=12, time_budget=budget, refine_settings=QUICK,
+                            atlas=False)  # fmt: skip
+    report, deadline = {}, time.monotonic() + seconds
+    found = search(Goal(_unit_crank_rocker(), True, False), Constraints(), options,
+                   pool_proposer(pool), Stages(False), deadline, report)  # fmt: skip
+    return found, report
+
+
+def test_a_longer_budget_holds_the_default_search(pool):
+    """With the same seed, a 60 s budget's search first finds what a default run finds (the
+    same best design before the polish) and then searches wider; it delivers no worse."""
+    short, short_report = _search(pool, 30, 600)
+    # The default search inside ends where a default run's would: 33 s before this deadline.
+    long, long_report = _search(pool, 60, 45)
+    assert "default_search" not in short_report
+    assert long_report["default_search"]["best"] == short_report["polish"]["before"]
+    assert long_report["refined"] > short_report["refined"]
+    assert np.min(long.chamfer) <= np.min(short.chamfer)
+
+
+def _polished(candidates, target, count, until) -> dict:
+    goal = Goal(target, True, False)
+    refine_finely = _refiner(goal, target, False, FINE, Constraints(), deadline=np.inf)
+    return _polish(candidates, count, 4, refine_finely, lambda *_: None, until)
+
+
+def _ranked():
+    candidates, target = _coarsely_refined(copies=4)
+    candidates.refined[:] = True
+    return candidates, target
+
+
+def test_the_polish_goes_down_the_ranking_while_time_remains():
+    candidates, target = _ranked()
+    assert _polished(candidates, target, 1, None)["designs"] == 1  # the best only
+    candidates, target = _ranked()
+    far = int(np.argmax(candidates.chamfer))
+    candidates.chamfer[far] = 2.5 * candidates.chamfer.min()  # past POLISH_RANGE times the best
+    assert searching.POLISH_RANGE < 2.5
+    old = candidates.batch.positions.copy()
+    done = _polished(candidates, target, 1, time.monotonic() + 600)
+    assert done["designs"] == 3  # one at a time, down to the one too far
+    moved = np.abs(candidates.batch.positions - old).max((1, 2)) > 0
+    assert moved.tolist() == [row != far for row in range(4)]
+    candidates, target = _ranked()  # out of time after the first: only the best
+    assert _polished(candidates, target, 1, time.monotonic())["designs"] == 1
