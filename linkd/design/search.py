@@ -125,38 +125,48 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
     rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
-    first = None
+    default_search = None
     if polishing and o.rounds is None and budget_steps(o.time_budget) > 1:
         # The default run's own deadline: as far before the wide search's as its budget is
         # shorter, less the polish's share of the difference.
         end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
         short = replace(o, time_budget=BUDGET_STEP)
-        first = _explore(goal, target, inner, short, graphs, stages, end, {})
-        report["default_search"] = {"best": float(np.min(first[0].chamfer))}
+        default_search = _explore(goal, target, inner, short, graphs, stages, end, {})
+        report["default_search"] = {"best": float(np.min(default_search[0].chamfer))}
+        # Polished as a default run polishes: the design it would deliver is then in hand.
+        _polish_stage(default_search[0], goal, inner, short, deadline, stages, None)
     candidates, placed = _explore(goal, target, inner, o, graphs, stages, rounds_end, report)
-    if first is not None:
-        candidates, placed = merged(first[0], candidates), np.concatenate([first[1], placed])
+    if default_search is not None:
+        found, found_placed = default_search
+        candidates, placed = merged(found, candidates), np.concatenate([found_placed, placed])
     if goal.closed:  # a closed timed path: its phase is measured again on delivery
         candidates.ranges = None
     report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
     used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
     report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
     if polishing and time.monotonic() < deadline:
-        with stages.stage("polish", "refining the best designs at finer crank angles") as note:
-            count = POLISH * budget_steps(o.time_budget)
-            settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-            polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
-                             ordered_iterations=0, ordered_weights=(0.0,), keep=count)  # fmt: skip
-            fine = target if goal.fine is None else goal.fine
-            refine_finely = _refiner(goal, fine, stroke, polish, inner, deadline)
-            until = deadline if budget_steps(o.time_budget) > 1 else None
-            done = _polish(candidates, count, o.per_topology, refine_finely,
-                           _progress(stages, count, polish), until)  # fmt: skip
-            report["polish"] = done
-            if done["designs"]:
-                note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
-                     f"{done['after']:.4f}")  # fmt: skip
+        until = deadline if budget_steps(o.time_budget) > 1 else None
+        report["polish"] = _polish_stage(candidates, goal, inner, o, deadline, stages, until)
     return candidates
+
+
+def _polish_stage(candidates: Candidates, goal: Goal, inner: Constraints, o: DesignOptions,
+                  deadline: float, stages: Stages, until: float | None) -> dict:  # fmt: skip
+    """The polish of a drawn loop's best designs as a stage (`_polish`): POLISH for each 30 s
+    of `o`'s budget, against the user's curve read finely."""
+    with stages.stage("polish", "refining the best designs at finer crank angles") as note:
+        count = POLISH * budget_steps(o.time_budget)
+        settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
+        polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
+                         ordered_iterations=0, ordered_weights=(0.0,), keep=count)  # fmt: skip
+        fine = goal.points if goal.fine is None else goal.fine
+        refine_finely = _refiner(goal, fine, False, polish, inner, deadline)
+        done = _polish(candidates, count, o.per_topology, refine_finely,
+                       _progress(stages, count, polish), until)  # fmt: skip
+        if done["designs"]:
+            note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
+                 f"{done['after']:.4f}")  # fmt: skip
+    return done
 
 
 def _proposals(proposer: Proposer | None, target: np.ndarray, o: DesignOptions,
@@ -282,11 +292,11 @@ def _polish(candidates: Candidates, count: int, per_topology: int, refine_finely
     """Refine the best `count` candidates (at most `per_topology` of a topology) once more, at
     the finer crank angles of `refine_finely`; with `until` (a `time.monotonic()` value), the
     next `count` refined ones after them and so on down the ranking while time remains, as
-    far as POLISH_RANGE times the best error. A path traced at a few hundred angles cuts the corners
-    where the end effector moves fast, so refinement can settle where the polyline fits but
-    the path does not; at finer angles it moves on, and a design ranked lower at the coarse
-    angles may end first. A design that misses the hard limits at the finer angles keeps its
-    place and error. Returns what it did, for the report."""
+    far as POLISH_RANGE times the best error. A path traced at a few hundred angles cuts the
+    corners where the end effector moves fast, so refinement can settle where the polyline
+    fits but the path does not; at finer angles it moves on, and a design ranked lower at the
+    coarse angles may end first. A design that misses the hard limits at the finer angles
+    keeps its place and error. Returns what it did, for the report."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
     if until is not None and len(order):
