@@ -8,9 +8,9 @@ from test_design import QUICK, pool_proposer
 from test_polish import FINE, _coarsely_refined, _unit_crank_rocker
 
 from linkd.constraints import Constraints
-from linkd.design import search as searching
 from linkd.design.pipeline import DesignOptions
-from linkd.design.search import _polish, _refiner, search
+from linkd.design.polish import POLISH_RANGE, polish
+from linkd.design.search import _refiner, search
 from linkd.design.stages import Stages
 from linkd.design.stroke import Goal
 
@@ -41,7 +41,7 @@ def test_a_longer_budget_holds_the_default_search(pool):
 def _polished(candidates, target, count, until) -> dict:
     goal = Goal(target, True, False)
     refine_finely = _refiner(goal, target, False, FINE, Constraints(), deadline=np.inf)
-    return _polish(candidates, count, 4, refine_finely, lambda *_: None, until)
+    return polish(candidates, count, 4, refine_finely, lambda *_: None, until)
 
 
 def _ranked():
@@ -56,7 +56,7 @@ def test_the_polish_goes_down_the_ranking_while_time_remains():
     candidates, target = _ranked()
     far = int(np.argmax(candidates.chamfer))
     candidates.chamfer[far] = 2.5 * candidates.chamfer.min()  # past POLISH_RANGE times the best
-    assert searching.POLISH_RANGE < 2.5
+    assert POLISH_RANGE < 2.5
     old = candidates.batch.positions.copy()
     done = _polished(candidates, target, 1, time.monotonic() + 600)
     assert done["designs"] == 3  # one at a time, down to the one too far

@@ -1,4 +1,4 @@
-"""The last refinement of the best designs, at finer crank angles (linkd.design.search._polish)."""
+"""The last refinement of the best designs, at finer crank angles (linkd.design.polish)."""
 
 import time
 from dataclasses import replace
@@ -11,9 +11,10 @@ from test_refine import _perturbed
 from linkd import classic
 from linkd.constraints import Constraints
 from linkd.design.pipeline import DesignOptions
+from linkd.design.polish import polish
 from linkd.design.propose import Candidates
 from linkd.design.refine import RefineSettings, refine
-from linkd.design.search import POLISH_SHARE, _polish, _refiner, search
+from linkd.design.search import POLISH_SHARE, _refiner, search
 from linkd.design.select import curve_error, end_effector_path, to_mechanism
 from linkd.design.stages import Stages
 from linkd.design.stroke import Goal
@@ -44,7 +45,7 @@ def _polished(candidates, target, settings, count=3, per_topology=3) -> dict:
     settings = replace(settings, keep=count)
     goal = Goal(target, True, False)
     refine_finely = _refiner(goal, target, False, settings, Constraints(), deadline=np.inf)
-    return _polish(candidates, count, per_topology, refine_finely, lambda *_: None)
+    return polish(candidates, count, per_topology, refine_finely, lambda *_: None)
 
 
 def test_finer_angles_take_designs_on_from_where_coarse_ones_settled():

@@ -28,6 +28,7 @@ from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
 from .constrained import pin, rank, tightened
 from .parallel import PARTS, run_parts, split
+from .polish import polish
 from .propose import (
     SOURCES,
     Candidates,
@@ -67,7 +68,6 @@ POLISH_ANGLES = 1024
 POLISH_ITERATIONS = 200
 STALL_ROUNDS = 4  # a longer budget's rounds end after this many that gain under STALL_GAIN
 STALL_GAIN = 0.005  # (of the best error): the polish then has their time
-POLISH_RANGE = 2.0  # a longer budget polishes down the ranking to this many times the best error
 POLISH_SHARE = 0.1  # of the budget kept from the rounds for the polish (a long budget's rounds
 # would run to the deadline and leave it none)
 
@@ -152,17 +152,17 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
 
 def _polish_stage(candidates: Candidates, goal: Goal, inner: Constraints, o: DesignOptions,
                   deadline: float, stages: Stages, until: float | None) -> dict:  # fmt: skip
-    """The polish of a drawn loop's best designs as a stage (`_polish`): POLISH for each 30 s
-    of `o`'s budget, against the user's curve read finely."""
+    """The polish of a drawn loop's best designs as a stage (`polish.polish`): POLISH for each
+    30 s of `o`'s budget, against the user's curve read finely."""
     with stages.stage("polish", "refining the best designs at finer crank angles") as note:
         count = POLISH * budget_steps(o.time_budget)
         settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
-        polish = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
+        finely = replace(settings, angles=POLISH_ANGLES, iterations=POLISH_ITERATIONS,
                          ordered_iterations=0, ordered_weights=(0.0,), keep=count)  # fmt: skip
         fine = goal.points if goal.fine is None else goal.fine
-        refine_finely = _refiner(goal, fine, False, polish, inner, deadline)
-        done = _polish(candidates, count, o.per_topology, refine_finely,
-                       _progress(stages, count, polish), until)  # fmt: skip
+        refine_finely = _refiner(goal, fine, False, finely, inner, deadline)
+        done = polish(candidates, count, o.per_topology, refine_finely,
+                      _progress(stages, count, finely), until)  # fmt: skip
         if done["designs"]:
             note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
                  f"{done['after']:.4f}")  # fmt: skip
@@ -285,39 +285,6 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 gained = np.min(candidates.chamfer) < (1 - STALL_GAIN) * best
                 best, stalled = min(best, np.min(candidates.chamfer)), 0 if gained else stalled + 1
     return candidates, placed
-
-
-def _polish(candidates: Candidates, count: int, per_topology: int, refine_finely: Callable,
-            progress, until: float | None = None) -> dict:  # fmt: skip
-    """Refine the best `count` candidates (at most `per_topology` of a topology) once more, at
-    the finer crank angles of `refine_finely`; with `until` (a `time.monotonic()` value), the
-    next `count` refined ones after them and so on down the ranking while time remains, as
-    far as POLISH_RANGE times the best error. A path traced at a few hundred angles cuts the
-    corners where the end effector moves fast, so refinement can settle where the polyline
-    fits but the path does not; at finer angles it moves on, and a design ranked lower at the
-    coarse angles may end first. A design that misses the hard limits at the finer angles
-    keeps its place and error. Returns what it did, for the report."""
-    order = np.argsort(candidates.chamfer, kind="stable")
-    order = order[np.isfinite(candidates.chamfer[order])]
-    if until is not None and len(order):
-        near = candidates.chamfer[order] <= POLISH_RANGE * candidates.chamfer[order[0]]
-        order = order[near & candidates.refined[order]]
-    ranking = diverse_best(candidates.batch, order, count if until is None else len(order),
-                           per_topology)  # fmt: skip
-    if not ranking:
-        return {"designs": 0}
-    before, done = float(candidates.chamfer[ranking[0]]), []
-    for start in range(0, len(ranking), count):
-        rows = np.array(ranking[start : start + count], int)
-        errors = candidates.chamfer[rows].copy()
-        refine_finely(candidates, rows, progress)
-        lost = ~np.isfinite(candidates.chamfer[rows])
-        candidates.chamfer[rows[lost]] = errors[lost]  # positions are kept where it fails
-        done.extend(rows)
-        if until is None or time.monotonic() >= until:
-            break
-    return {"designs": len(done), "before": before,
-            "after": float(candidates.chamfer[done].min())}  # fmt: skip
 
 
 def _refiner(

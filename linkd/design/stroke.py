@@ -42,7 +42,7 @@ CHUNK = 128  # candidates searched at a time
 class Goal:
     """A target in its normalised frame: `points` (M, 2) equally spaced by arc length (or, when
     timed, in time), `closed` or open, `timed` or not; a drawn loop also `fine`: the same curve
-    read at more points, for the last refinement (`search._polish`)."""
+    read at more points, for the last refinement (`polish`)."""
 
     points: np.ndarray
     closed: bool
