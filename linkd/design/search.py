@@ -125,8 +125,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
     rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
+    longer = budget_steps(o.time_budget) > 1
     default_search = None
-    if polishing and o.rounds is None and budget_steps(o.time_budget) > 1:
+    if polishing and o.rounds is None and longer:
         # The default run's own deadline: as far before the wide search's as its budget is
         # shorter, less the polish's share of the difference.
         end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
@@ -145,7 +146,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
     report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
     if polishing and time.monotonic() < deadline:
-        until = deadline if budget_steps(o.time_budget) > 1 else None
+        until = deadline if longer else None
         report["polish"] = _polish_stage(candidates, goal, inner, o, deadline, stages, until)
     return candidates
 
