@@ -156,6 +156,7 @@ def _free_port() -> int:
 
 
 def _worker(rank: int, world: int, port: int, config, data) -> None:
+    import gc
     import os
 
     os.environ.update(MASTER_ADDR="127.0.0.1", MASTER_PORT=str(port), RANK=str(rank),
@@ -169,6 +170,7 @@ def _worker(rank: int, world: int, port: int, config, data) -> None:
     if rank == 0:
         torch.save(torch.stack(gathered), f"{config.out}/gathered.pt")
     dist.barrier()  # no rank leaves (closing its sockets) while another still talks to it
+    gc.collect()  # free what may still hold the group (a reference cycle) before it goes
     dist.destroy_process_group()
 
 
