@@ -5,8 +5,8 @@
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
-`routing`; where bent ones cannot either, the crank splits into arms on a shaft held by a
-ground bracket, `braced`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
+`routing`; where bent ones cannot either, plates split into arms on a shaft and ground pins
+are held by brackets, `braced`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
 loop closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
@@ -107,9 +107,10 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    and then the crank splits into arms on a shaft held by a ground bracket (`braced`, unless
-    `options.brackets` is off). Widths the user gave are kept (the other constructions are still
-    tried; ValueError when nothing works). quick: straight links at the first width only."""
+    and then plates split into arms on a shaft and ground pins are held by brackets (`braced`,
+    unless `options.brackets` is off). Widths the user gave are kept (the other constructions
+    are still tried; ValueError when nothing works). quick: straight links at the first width
+    only."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None and not quick:
@@ -229,6 +230,14 @@ def describe_parts(
         if pin.joint in shafts:
             entry["fixed_in"] = assembly.parts[shafts[pin.joint]].name
         out.append(entry)
+    for shaft in layout.shafts:
+        lo, hi = shaft.span
+        name = assembly.parts[shaft.part].name
+        out.append({
+            "name": shaft.name, "kind": "pin", "joints": [shaft.joint], "layers": [lo, hi],
+            "joins": [name], "diameter": sizes.hole_diameter, "fixed_in": name,
+            "length": (hi - lo) * sizes.pitch + sizes.thickness,
+        })  # fmt: skip
     for k, ((lo, hi), bracket) in enumerate(zip(post_spans(layout), layout.brackets)):
         out.append({
             "name": f"{assembly.parts[0].name}_post{k}", "kind": "post", "at": list(bracket.post),

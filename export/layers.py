@@ -45,6 +45,28 @@ class Arm:
     layer: int
 
 
+class NoFlatLayers(ValueError):
+    """No order of flat layers keeps every pin clear; `proved` unless the search ran out."""
+
+    def __init__(self, message: str, proved: bool):
+        super().__init__(message)
+        self.proved = proved
+
+
+@dataclass(frozen=True)
+class Shaft:
+    """The pin a split part's arms are fixed on, at a joint the part shares with no other part
+    (elsewhere the joint's own pin is the shaft). It is named as a pin would be there."""
+
+    part: int
+    joint: int
+    span: tuple[int, int]  # (lowest, highest) layer: the part's arms
+
+    @property
+    def name(self) -> str:
+        return f"pin_{self.joint}"
+
+
 @dataclass(frozen=True)
 class Bracket:
     """A ground plate on a layer inside the stack, holding the pin of a ground joint, with an
@@ -67,6 +89,7 @@ class Layout:
     bends: dict[int, np.ndarray] = field(default_factory=dict)  # bent links' waypoints (routing)
     arms: dict[int, tuple[Arm, ...]] = field(default_factory=dict)  # split parts (`braced`)
     brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
+    shafts: tuple[Shaft, ...] = ()  # split parts' own pins at joints no other part shares
 
 
 @dataclass(frozen=True)
@@ -273,9 +296,10 @@ def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layo
             break
         proved &= done
     else:
-        raise ValueError(
+        raise NoFlatLayers(
             "cannot be built from flat layers: some parts pass over pins whose plates lie above "
-            f"and below them, in every order {'tried' if proved else 'the search could try'}"
+            f"and below them, in every order {'tried' if proved else 'the search could try'}",
+            proved,
         )
     layers = stack_in_order(moving, order)
     fewest, minimal = chromatic_number(moving)

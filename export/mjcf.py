@@ -155,8 +155,9 @@ class _Builder:
             ET.SubElement(body, "geom", name=f"{plate.name}_bar{k}", type="box",
                           size=_fmt(length / 2, self.width / 2, self.thickness / 2),
                           pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
+        posts = points[len(plate.joints) :]  # a disc round each post, named apart from the post
         discs = [*zip((f"boss{j}" for j in plate.joints), points),
-                 *zip((f"post{k}" for k in range(len(plate.posts))), points[len(plate.joints):]),
+                 *zip((f"post{k}_boss" for k in range(len(posts))), posts),
                  *zip((f"bend{k}" for k in range(len(bends))), bends)]  # fmt: skip
         for name, (x, y) in discs:
             ET.SubElement(body, "geom", name=f"{plate.name}_{name}", type="cylinder",
@@ -177,11 +178,15 @@ class _Builder:
     def pin(self, k: int) -> None:
         """A pin body on its hub, spanning the layers of the parts it joins."""
         pin = self.assembly.pins[k]
-        lo, hi = self.layout.pin_spans[k]
+        self.rod(pin.hub, pin.name, pin.joint, self.layout.pin_spans[k])
+
+    def rod(self, part: int, name: str, joint: int, span: tuple[int, int]) -> None:
+        """A pin (or a split part's shaft) as a body welded to `part`, over the layers `span`."""
+        lo, hi = span
         bottom, top = lo * self.pitch, hi * self.pitch + self.thickness
-        x, y = self.local(pin.hub, pin.joint)
-        body = ET.SubElement(self.bodies[pin.hub], "body", name=pin.name, pos=_fmt(x, y, 0))
-        ET.SubElement(body, "geom", name=pin.name, type="cylinder",
+        x, y = self.local(part, joint)
+        body = ET.SubElement(self.bodies[part], "body", name=name, pos=_fmt(x, y, 0))
+        ET.SubElement(body, "geom", name=name, type="cylinder",
                       size=_fmt(self.hole / 2, (top - bottom) / 2),
                       pos=_fmt(0, 0, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip
 
@@ -226,6 +231,8 @@ def build_mjcf(
         for m in pin.members:
             if m != pin.hub:
                 ET.SubElement(contact, "exclude", body1=pin.name, body2=assembly.parts[m].name)
+    for shaft in layout.shafts:
+        b.rod(shaft.part, shaft.name, shaft.joint, shaft.span)
     equality = ET.SubElement(root, "equality")
     for loop in assembly.loops:
         ET.SubElement(equality, "connect", name=loop.name, site1=b.site(loop.part, loop.joint),

@@ -1,5 +1,6 @@
-"""Split cranks on a ground bracket (linkd.export.braced): a mechanism that neither straight nor
-bent links can layer built and verified, and planted collisions of its arms and bracket caught."""
+"""Split plates and ground brackets (linkd.export.braced): mechanisms that neither straight nor
+bent links can layer, built and verified, and planted collisions of arms, shafts, brackets and
+posts caught."""
 
 import xml.etree.ElementTree as ET
 
@@ -12,42 +13,86 @@ from linkd.export.layers import assign_layers, sweep
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
 from linkd.export.routing import bent_layers
+from linkd.mechanism import Mechanism
 from linkd.verify import verify_output
+
+# Generated (seed 2026, no. 90 of 200): refused before plates other than the crank could split.
+# Its five-joint plate splits on a shaft at joint 8, which no other part shares, and ground
+# pin 11 is held by a bracket.
+STACKED = Mechanism(
+    [(-93.225, -89.054), (-68.702, -86.843), (71.998, -89.146), (-73.228, -34.543),
+     (-45.291, 33.477), (-93.772, 34.618), (-16.545, 71.46), (37.706, 32.481), (91.049, 61.354),
+     (-3.935, 46.712), (75.502, -8.088), (-42.077, 13.98), (-95.68, 97.344), (-88.157, 41.722),
+     (76.274, 20.497), (88.373, -36.959), (31.151, -91.223), (-18.075, -22.546)],
+    [1, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 1, 0, 0, 0, 0],
+    [(0, 1), (0, 4), (0, 9), (0, 16), (1, 3), (1, 4), (1, 7), (1, 14), (2, 3), (2, 5), (2, 8),
+     (2, 10), (3, 5), (3, 8), (3, 15), (4, 15), (5, 9), (5, 10), (5, 12), (6, 7), (7, 17),
+     (9, 16), (9, 17), (11, 12), (13, 14)],
+    (0, 1), 17,
+)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
-def braced(tmp_path_factory):
-    out = tmp_path_factory.mktemp("braced")
+def knotted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("knotted")
     return out, export_mechanism(KNOTTED, out, {"mjcf", "stl"})
 
 
-def test_refused_flat_and_bent_is_built_split_on_a_bracket_and_verified(braced):
-    out, result = braced
-    assembly = assemble(KNOTTED)
-    sizes = resolve_sizes(KNOTTED, assembly.parts, None)
-    paths = sweep(KNOTTED, sizes.link_width)
+@pytest.fixture(scope="module")
+def stacked(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stacked")
+    return out, export_mechanism(STACKED, out, {"mjcf", "stl"})
+
+
+def _refused_flat_and_bent(mech: Mechanism) -> None:
+    assembly = assemble(mech)
+    sizes = resolve_sizes(mech, assembly.parts, None)
+    paths = sweep(mech, sizes.link_width)
     for layering in (assign_layers, bent_layers):
         with pytest.raises(ValueError, match="flat layers"):
             layering(assembly, paths, sizes)
-    parts = {p["name"]: p for p in result.parts}
-    arms = [p for p in result.parts if p.get("arm_of") == "plate_0_1_2"]
-    assert sorted(tuple(p["joints"]) for p in arms) == [(0, 1), (0, 2)]
-    assert len({p["layer"] for p in arms}) == 2  # one arm each side of the bracket
-    bracket, post = parts["ground_bracket0"], parts["ground_post0"]
-    assert bracket["joints"] == [0] and bracket["posts"] == [post["at"]]
-    assert min(p["layer"] for p in arms) < bracket["layer"] < max(p["layer"] for p in arms)
-    base = parts["ground_cover" if post["layers"][1] > bracket["layer"] else "ground"]
-    assert post["at"] in base["posts"] and bracket["layer"] in post["layers"]
-    assert parts["pin_0"]["fixed_in"] == "plate_0_1_2"
-    for part in result.parts:  # every plate a solid; every pin reaches the plates it joins
+
+
+def _check_parts(out, parts: list[dict]) -> None:
+    """Every plate a watertight solid; every pin reaches exactly the plates with its hole; the
+    arms of a split part all turn on the one shaft, fixed in the part."""
+    for part in parts:
         if "mesh" in part:
             solid = trimesh.load(out / part["mesh"])
             assert solid.is_watertight and solid.is_volume
         if part["kind"] == "pin":
             lo, hi = part["layers"]
-            holes = [p["layer"] for p in result.parts if "layer" in p and p["kind"] != "pin"
+            holes = [p["layer"] for p in parts if "layer" in p and p["kind"] != "pin"
                      and part["joints"][0] in p["joints"]]  # fmt: skip
             assert min(holes) == lo and max(holes) == hi
+    split = {p["arm_of"] for p in parts if "arm_of" in p}
+    assert split
+    for name in split:
+        arms = [p for p in parts if p.get("arm_of") == name]
+        shaft = {p["joints"][0] for p in arms}
+        assert len(shaft) == 1 and len(arms) >= 2
+        pin = next(p for p in parts if p["kind"] == "pin" and p["joints"] == list(shaft))
+        assert pin["fixed_in"] == name
+
+
+def test_a_crank_refused_flat_and_bent_is_built_split_and_verified(knotted):
+    out, result = knotted
+    _refused_flat_and_bent(KNOTTED)
+    _check_parts(out, result.parts)
+    assert {p["arm_of"] for p in result.parts if "arm_of" in p} == {"plate_0_1_2"}
+    assert verify_output(out, write=False).passed
+
+
+def test_a_plate_split_on_its_own_shaft_and_a_bracketed_pin_are_built_and_verified(stacked):
+    out, result = stacked
+    _refused_flat_and_bent(STACKED)
+    _check_parts(out, result.parts)
+    parts = {p["name"]: p for p in result.parts}
+    shaft = parts["pin_8"]  # joint 8 is on the plate alone: the shaft is the plate's own pin
+    assert shaft["joins"] == ["plate_2_3_5_8_10"] == [shaft["fixed_in"]]
+    bracket, post = parts["ground_bracket0"], parts["ground_post0"]
+    assert bracket["joints"] == [11] and bracket["posts"] == [post["at"]]
+    assert bracket["layer"] in post["layers"] and bracket["layer"] in parts["pin_11"]["layers"]
     report = verify_output(out, write=False)
     assert report.passed, report.failed
 
@@ -66,27 +111,29 @@ def _z(out, name: str) -> float:
     return float(next(g for g in tree.iter("geom") if g.get("name") == name).get("pos").split()[2])
 
 
-@pytest.mark.parametrize("plant", ["arm", "bracket", "post"])
-def test_a_planted_collision_in_the_split_crank_or_its_bracket_is_caught(braced, tmp_path, plant):
-    """An arm laid on the layer of the coupler that sweeps over it, the bracket laid on an
-    arm's layer, or the post set down at the pivot: verification must name the part."""
-    out, result = braced
-    parts = {p["name"]: p for p in result.parts}
+@pytest.mark.parametrize("plant", ["arm", "shaft", "bracket", "post"])
+def test_a_planted_collision_in_a_split_plate_or_a_bracket_is_caught(stacked, tmp_path, plant):
+    """An arm laid on the layer of a link it shares a joint with, the shaft moved onto another
+    joint, the bracket laid on its link's layer, or the post set down across that link:
+    verification must name the part."""
+    out, _ = stacked
     for path in out.iterdir():
         (tmp_path / path.name).symlink_to(path)
     (tmp_path / "mechanism.xml").unlink()
-    if plant == "arm":  # the arm to joint 2 onto the layer of the link at joint 1
-        arm = next(p["name"] for p in result.parts if p.get("joints") == [0, 2])
-        name, tree = arm, _moved(out, arm, z=_z(out, "link_1_6"))
+    if plant == "arm":  # the arm to joint 3 onto link_3_15's layer: their bosses overlap
+        name = "plate_2_3_5_8_10_arm1"
+        tree = _moved(out, name, z=_z(out, "link_3_15"))
+    elif plant == "shaft":  # the shaft, layers 1..16, stood at joint 5 through link_5_12
+        name = "pin_8"
+        x, y = (STACKED.positions[5] - STACKED.positions[8]) * 1e-3  # in the pin's body frame
+        tree = _moved(out, name, xy=(x, y))
     elif plant == "bracket":
-        arm = next(p["name"] for p in result.parts if p.get("joints") == [0, 1])
-        name, tree = "ground_bracket0", _moved(out, "ground_bracket0", z=_z(out, arm))
-    else:
-        arm = next(p for p in result.parts if p.get("joints") == [0, 1])
-        lo, hi = parts["ground_post0"]["layers"]
-        assert lo <= arm["layer"] <= hi  # the post crosses the arm's layer
-        x, y = KNOTTED.positions[[0, 1]].mean(0) * 1e-3  # across the arm to joint 1, metres
-        name, tree = "ground_post0", _moved(out, "ground_post0", xy=(x, y))
+        name = "ground_bracket0"
+        tree = _moved(out, name, z=_z(out, "link_11_12"))
+    else:  # the post, layers 0..5, at the middle of link_11_12 (layer 4)
+        name = "ground_post0"
+        x, y = STACKED.positions[[11, 12]].mean(0) * 1e-3
+        tree = _moved(out, name, xy=(x, y))
     tree.write(tmp_path / "mechanism.xml")
     report = verify_output(tmp_path, write=False)
     assert "collisions" in report.failed
@@ -100,3 +147,12 @@ def test_without_brackets_the_same_mechanism_is_refused(tmp_path):
     assert not buildable(KNOTTED, ExportOptions(brackets=False))
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(KNOTTED, tmp_path, {"mjcf"}, ExportOptions(brackets=False))
+
+
+def test_a_bracketed_model_without_meshes_compiles(tmp_path):
+    """Without STL the plates are boxes and discs: the disc round a post in the base plate is
+    named apart from the post itself (MuJoCo refuses a repeated geom name)."""
+    result = export_mechanism(STACKED, tmp_path, {"mjcf"})
+    assert any(p["kind"] == "post" for p in result.parts)
+    names = [g.get("name") for g in ET.parse(tmp_path / "mechanism.xml").iter("geom")]
+    assert "ground_post0" in names and len(names) == len(set(names))

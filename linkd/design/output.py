@@ -55,8 +55,8 @@ def deliver(
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
     fails any step, counted in `skipped` by the step ("invalid", "unbuildable": the export
     refused it, "failed_verification"). `target` is the user's curve, in the mechanism's frame
-    (`timed`: its rows equally spaced in time; `brackets`: whether the export may split the
-    crank on a ground bracket)."""
+    (`timed`: its rows equally spaced in time; `brackets`: whether the export may split
+    plates and hold ground pins on brackets)."""
     skipped = Counter() if skipped is None else skipped
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
