@@ -55,10 +55,9 @@ MAX_SEARCHES = 300  # layer searches per width before the construction gives up
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """Layers with some plates split into arms on a shaft and some ground pins held by
     brackets. ValueError when no choice layers within MAX_SEARCHES layer searches."""
-    pinned = {pin.joint for pin in assembly.pins}
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
-    union, extended, roles, posts = _candidates(assembly, paths, sizes, pinned, ground)
+    union, extended, roles, posts = _candidates(assembly, paths, sizes, ground)
     conflicts = find_conflicts(union, extended, sizes)
     bracket = _best_brackets(conflicts, roles)
 
@@ -92,7 +91,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
                     layered(split, (), ground)
                     loose[k] = True
                 except NoFlatLayers as exc:
-                    loose[k], refusal = None if not exc.proved else False, refusal or exc
+                    loose[k], refusal = False if exc.proved else None, refusal or exc
             if loose[k] is not bound:
                 continue
             searches += 1
@@ -106,7 +105,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
 
 
 def _candidates(
-    assembly: Assembly, paths: np.ndarray, sizes: Sizes, pinned: set[int], ground: tuple[int, ...]
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes, ground: tuple[int, ...]
 ) -> tuple[Assembly, np.ndarray, list[tuple], np.ndarray]:
     """Every candidate part as the layer search sees it: the real parts, every plate's arms for
     each shaft joint (a link from the shaft to one more joint), and a bracket for each ground
@@ -136,6 +135,7 @@ def _candidates(
         members = [0] * (0 in pin.members)
         members += [q for q, part in enumerate(parts) if q and pin.joint in part.joints]
         pins.append(Pin(pin.name, pin.joint, members[0], tuple(members)))
+    pinned = {pin.joint for pin in assembly.pins}
     for q, part in enumerate(assembly.parts):  # a shaft where no pin is: the split part's own
         for j in (j for j in part.joints if j not in pinned) if part.kind == "plate" else ():
             members = tuple(k for k, other in enumerate(parts) if j in other.joints)
