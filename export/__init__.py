@@ -6,8 +6,9 @@
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
 `routing`; where bent ones cannot either, plates split into arms on a shaft and ground pins
-are held by brackets, `braced`), plates become STL meshes (`meshes`) and the bodies, hinges, pins,
-loop closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
+are held by brackets or as two stubs from base and cover, `braced`), plates become STL meshes
+(`meshes`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
+with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
-from .layers import Layout, assign_layers, plate_points, plates, post_spans, sweep
+from .layers import Layout, assign_layers, pin_rods, plate_points, plates, post_spans, sweep
 from .mjcf import (
     PROBE_DENSITY,
     TIMESTEP,
@@ -107,10 +108,10 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    and then plates split into arms on a shaft and ground pins are held by brackets (`braced`,
-    unless `options.brackets` is off). Widths the user gave are kept (the other constructions
-    are still tried; ValueError when nothing works). quick: straight links at the first width
-    only."""
+    and then plates split into arms on a shaft and ground pins are held by brackets or as
+    stubs from both plates (`braced`, unless `options.brackets` is off). Widths the user gave
+    are kept (the other constructions are still tried; ValueError when nothing works). quick:
+    straight links at the first width only."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None and not quick:
@@ -221,14 +222,15 @@ def describe_parts(
             entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
         out.append(entry)
     shafts = {arms[0].joints[0]: p for p, arms in layout.arms.items()}
-    for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
+    for rod in pin_rods(assembly, layout):
+        lo, hi = rod.span
         entry = {
-            "name": pin.name, "kind": "pin", "joints": [pin.joint], "layers": [lo, hi],
-            "joins": [assembly.parts[m].name for m in pin.members],
+            "name": rod.name, "kind": "pin", "joints": [rod.joint], "layers": [lo, hi],
+            "joins": [assembly.parts[m].name for m in rod.members],
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
         }  # fmt: skip
-        if pin.joint in shafts:
-            entry["fixed_in"] = assembly.parts[shafts[pin.joint]].name
+        if rod.joint in shafts:
+            entry["fixed_in"] = assembly.parts[shafts[rod.joint]].name
         out.append(entry)
     for shaft in layout.shafts:
         lo, hi = shaft.span

@@ -1,5 +1,5 @@
-"""Plates split into arms on a shaft, ground pins held by brackets: for mechanisms no flat
-layering builds.
+"""Plates split into arms on a shaft, ground pins held by brackets or as stubs from both plates:
+for mechanisms no flat layering builds.
 
 In some mechanisms a part crosses, near its own joints, the pins of parts that turn about
 them: typically a ternary plate whose two couplers each sweep, in the plate's frame, a whole
@@ -20,11 +20,13 @@ links change that. Two constructions, in any combination, do:
 
 The arms, brackets and posts are layered like any other parts and pins: a bracket is a static
 link from the pivot to the post, the post a pin of the ground at a point that never moves, and
-the layer search keeps every part clear of them. The clearances of every candidate (each plate
-whole and its arms for each shaft, a bracket in each direction at each ground pin) are swept
-once; each choice is layered from its share of them, the fewest brackets first, then the
-fewest split plates. A choice is not searched when the same split plates with every ground pin
-free of the ground (a looser problem than any bracket, base or cover) are proved not to layer.
+the layer search keeps every part clear of them. Here the parts of a ground pin may also be
+held from both plates (`layers.stack_layers`, stubs), except at a split part's shaft, which
+stays whole. The clearances of every candidate (each plate whole and its arms for each shaft,
+a bracket in each direction at each ground pin) are swept once; each choice is layered from its
+share of them, the fewest brackets first, then the fewest split plates. A choice is not
+searched when the same split plates with no ground pins at all (a looser problem than any
+bracket, base, cover or stubs) are proved not to layer.
 """
 
 from __future__ import annotations
@@ -61,16 +63,18 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     conflicts = find_conflicts(union, extended, sizes)
     bracket = _best_brackets(conflicts, roles)
 
-    def layered(split: dict[int, int], held: tuple[int, ...], free: tuple[int, ...]):
+    def layered(split: dict[int, int], held: tuple[int, ...], bound: bool = False):
         keep = [q for q, role in enumerate(roles)
                 if (role[0] == "part" and role[1] not in split)
                 or (role[0] == "arm" and split.get(role[1]) == role[2])
                 or q in [bracket[g] for g in held]]  # fmt: skip
-        chosen, share = _subset(union, conflicts, keep, free)
-        return stack_layers(chosen, share, sizes), keep, chosen
+        chosen, share = _subset(union, conflicts, keep, held, ground if bound else ())
+        arms = [sum(roles[keep[m]][0] == "arm" for m in pin.members) for pin in chosen.pins]
+        shafts = [k for k, count in enumerate(arms) if count >= 2]  # stay whole at the ground
+        return stack_layers(chosen, share, sizes, stubs=True, whole=shafts), keep, chosen
 
-    try:  # every plate left out, every ground pin free: looser than any choice
-        layered({q: -1 for q in plates}, (), ground)
+    try:  # every plate left out, no ground pin at all: looser than any choice
+        layered({q: -1 for q in plates}, (), bound=True)
     except NoFlatLayers as exc:
         if exc.proved:
             raise
@@ -78,7 +82,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     picks = product(*shafts)
     splits = [{q: s for q, s in zip(plates, pick) if s is not None} for pick in picks]
     splits = sorted((s for s in splits if len(set(s.values())) == len(s)), key=len)
-    loose: dict[int, bool | None] = {}  # a split layers with every ground pin free (None: unknown)
+    loose: dict[int, bool | None] = {}  # a split layers with no ground pins (None: unknown)
     searches, refusal = 1, None
     helds = [c for r in range(len(ground) + 1) for c in combinations(ground, r)]
     for bound in (True, None):  # the splits that layer loose first, then those the search gave up
@@ -88,7 +92,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
             if k not in loose:
                 searches += 1
                 try:
-                    layered(split, (), ground)
+                    layered(split, (), bound=True)
                     loose[k] = True
                 except NoFlatLayers as exc:
                     loose[k], refusal = False if exc.proved else None, refusal or exc
@@ -96,7 +100,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
                 continue
             searches += 1
             try:
-                layout, keep, chosen = layered(split, held, held)
+                layout, keep, chosen = layered(split, held)
             except ValueError as exc:
                 refusal = refusal or exc
                 continue
@@ -160,14 +164,21 @@ def _best_brackets(conflicts: Conflicts, roles: list[tuple]) -> dict[int, int]:
 
 
 def _subset(
-    union: Assembly, conflicts: Conflicts, keep: list[int], free: tuple[int, ...]
+    union: Assembly,
+    conflicts: Conflicts,
+    keep: list[int],
+    free: tuple[int, ...],
+    dropped: tuple[int, ...] = (),
 ) -> tuple[Assembly, Conflicts]:
     """The assembly and conflicts of the candidates `keep` (the ground first): pins keep the
     members and blocking parts that are kept, and lapse with fewer than two members. The pins
-    at the joints `free` are not held by the ground (a bracket holds them, or none: a bound)."""
+    at the joints `free` are not held by the ground (a bracket holds them); those at the joints
+    `dropped` are left out (a bound: held in any way at all)."""
     index = {q: k for k, q in enumerate(keep)}
     pins, blocked = [], []
     for pin, near in zip(union.pins, conflicts.blocked):
+        if pin.joint in dropped:
+            continue
         members = tuple(index[q] for q in pin.members
                         if q in index and not (q == 0 and pin.joint in free))  # fmt: skip
         if len(members) >= 2:
@@ -208,4 +219,6 @@ def _real(
     top = tuple(j for j in layout.top_joints if j < first)
     return Layout(layers, layout.pin_spans[: len(assembly.pins)], top, layout.count,
                   layout.min_gap, layout.minimal, arms={p: tuple(a) for p, a in arms.items()},
-                  brackets=tuple(brackets), shafts=shafts)  # fmt: skip
+                  brackets=tuple(brackets), shafts=shafts,
+                  cover_stubs={k: span for k, span in layout.cover_stubs.items()
+                               if k < len(assembly.pins)})  # fmt: skip

@@ -8,13 +8,18 @@ is coloured with as few layers as a small exact search finds.
 
 The ground is a base plate under the stack of moving parts: the pins of ground joints stand in
 it. When no order of the stack lets every such pin reach up clear of the others, some pins hang
-from a cover plate over the stack instead (the two plates are one rigid frame).
+from a cover plate over the stack instead (the two plates are one rigid frame). Where even
+that fails (`braced` asks), each part at a ground joint may be held from either plate: the
+joint's pin is then two coaxial stubs, one standing in the base through the parts below those
+passing over the joint, one hanging from the cover through the parts above them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from itertools import combinations, pairwise
+from typing import NoReturn
 
 import numpy as np
 
@@ -90,6 +95,42 @@ class Layout:
     arms: dict[int, tuple[Arm, ...]] = field(default_factory=dict)  # split parts (`braced`)
     brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
     shafts: tuple[Shaft, ...] = ()  # split parts' own pins at joints no other part shares
+    cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `pin_rods`
+
+
+@dataclass(frozen=True)
+class Rod:
+    """A pin as made: a rod fixed in part `hub` over the layers `span`, through the holes of
+    `members` (hub included)."""
+
+    name: str
+    joint: int
+    hub: int
+    members: tuple[int, ...]
+    span: tuple[int, int]
+
+
+def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
+    """Every pin's rod. A ground pin whose parts are held from both plates (`cover_stubs`: pin
+    index to the span of its stub from the cover) is two: `pin_spans` standing in the base, its
+    stub (`<name>_top`) hanging from the cover, each through the parts within its span."""
+    rods = []
+    for k, pin in enumerate(assembly.pins):
+        if k not in layout.cover_stubs:
+            rods.append(Rod(pin.name, pin.joint, pin.hub, pin.members, layout.pin_spans[k]))
+            continue
+        stubs = {pin.name: layout.pin_spans[k], f"{pin.name}_top": layout.cover_stubs[k]}
+        for name, (lo, hi) in stubs.items():
+            inside = [m for m in pin.members if lo <= _layer_at(layout, m, pin.joint) <= hi]
+            members = tuple(m for m in pin.members if m == pin.hub or m in inside)
+            rods.append(Rod(name, pin.joint, pin.hub, members, (lo, hi)))
+    return rods
+
+
+def _layer_at(layout: Layout, part: int, joint: int) -> int:
+    """The layer of a part's plate at one of its joints (a split part's arm there)."""
+    arms = [arm.layer for arm in layout.arms.get(part, ()) if joint in arm.joints]
+    return arms[0] if arms else int(layout.layers[part])
 
 
 @dataclass(frozen=True)
@@ -110,12 +151,13 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     ground = assembly.parts[0]
     held = {b.joint for b in layout.brackets}
     base = tuple(j for j in ground.joints if j not in layout.top_joints and j not in held)
+    stubs = (assembly.pins[k].joint for k in layout.cover_stubs)
+    cover = tuple(sorted({*layout.top_joints, *stubs}))
     low = tuple(b.post for b in layout.brackets if not b.top)
     high = tuple(b.post for b in layout.brackets if b.top)
     out = [Plate(ground.name, 0, base, 0, posts=low)] if base or low else []
-    if layout.top_joints or high:
-        out.append(Plate(f"{ground.name}_cover", 0, layout.top_joints, layout.count - 1,
-                         posts=high))  # fmt: skip
+    if cover or high:
+        out.append(Plate(f"{ground.name}_cover", 0, cover, layout.count - 1, posts=high))
     for k, b in enumerate(layout.brackets):
         out.append(Plate(f"{ground.name}_bracket{k}", 0, (b.joint,), b.layer, posts=(b.post,)))
     for p, part in enumerate(assembly.parts[1:], start=1):
@@ -280,8 +322,18 @@ def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     return stack_layers(assembly, find_conflicts(assembly, paths, sizes), sizes)
 
 
-def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout:
-    """The layers of `assign_layers` for given conflicts (ValueError as there)."""
+def stack_layers(
+    assembly: Assembly,
+    conflicts: Conflicts,
+    sizes: Sizes,
+    stubs: bool = False,
+    whole: Collection[int] = (),
+) -> Layout:
+    """The layers of `assign_layers` for given conflicts (ValueError as there). stubs: the
+    parts of each ground pin but those `whole` (a split part's shaft) may be held from either
+    plate (`braced`), which is looser than any cover choice. It is searched first (proved
+    impossible, nothing else need be); then every pin in the base, and failing that the
+    stubs' order is taken."""
     moving = conflicts.parts[1:, 1:]
     pins = [
         ([m - 1 for m in pin.members if m], [b - 1 for b in blocked])
@@ -289,22 +341,26 @@ def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layo
     ]
     grounded = {k for k, pin in enumerate(assembly.pins) if 0 in pin.members}
     covers = [set(c) for r in range(len(grounded) + 1) for c in combinations(sorted(grounded), r)]
-    proved = True
-    for cover in covers[: 1 + MAX_COVER_TRIES]:  # no cover first, then the smallest
-        order, done = find_order(PinState(len(moving), pins, grounded, cover), moving)
+    covers = covers[: 1 + MAX_COVER_TRIES]  # no cover first, then the smallest
+    loose, proved = None, True
+    if stubs and grounded:  # stubs can do what a cover does: besides them only the base is tried
+        loose, done = find_order(_pin_state(len(moving), pins, grounded, None, whole), moving)
+        if loose is None and done:
+            _refuse(proved=True)
+        covers, proved = covers[:1], False  # the base's refusal proves nothing about stubs
+    for cover in covers:
+        order, done = find_order(_pin_state(len(moving), pins, grounded, cover, whole), moving)
         if order is not None:
             break
         proved &= done
     else:
-        raise NoFlatLayers(
-            "cannot be built from flat layers: some parts pass over pins whose plates lie above "
-            f"and below them, in every order {'tried' if proved else 'the search could try'}",
-            proved,
-        )
+        if loose is None:
+            _refuse(proved)
+        order, cover = loose, None
     layers = stack_in_order(moving, order)
     fewest, minimal = chromatic_number(moving)
     for stack in range(fewest, max(layers)):
-        search = StackSearch(moving, PinState(len(moving), pins, grounded, cover))
+        search = StackSearch(moving, _pin_state(len(moving), pins, grounded, cover, whole))
         found = search.run(stack)
         if found is not None:
             layers = found
@@ -313,18 +369,63 @@ def stack_layers(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layo
     return _layout(assembly, conflicts, sizes, layers, cover, max(layers), minimal)
 
 
+def _refuse(proved: bool) -> NoReturn:
+    raise NoFlatLayers(
+        "cannot be built from flat layers: some parts pass over pins whose plates lie above and "
+        f"below them, in every order {'tried' if proved else 'the search could try'}",
+        proved,
+    )
+
+
+def _pin_state(
+    n: int, pins: list, grounded: set[int], cover: set[int] | None, whole: Collection[int]
+) -> PinState:
+    """The pins' state for a search of n parts: ground pins stand in the base but those of
+    `cover`, which hang from the cover. With cover None, each part at a ground joint is held
+    from the plate on its side of the parts passing over the joint: that is a pin whose plates
+    are the passing parts and whose blocked parts are the joint's (none may lie between two
+    passing parts). A pin that must stay `whole` also keeps the passing parts from between its
+    own plates, so they all lie on one side: base or cover, whichever the search reaches."""
+    if cover is None:
+        swapped = []
+        for k, (members, passing) in enumerate(pins):
+            if k in grounded:
+                swapped.append((passing, members))
+            if k not in grounded or k in whole:
+                swapped.append((members, passing))
+        return PinState(n, swapped, set(), set())
+    return PinState(n, pins, grounded, cover)
+
+
 def _layout(assembly, conflicts, sizes, moving_layers, cover, stack, minimal) -> Layout:
-    """The layout of a search result: layers 1..stack of the moving parts, base and cover."""
+    """The layout of a search result: layers 1..stack of the moving parts, base and cover (a
+    ground pin's parts held from the cover: all of `cover`'s, or with cover None those above
+    the parts passing over the joint)."""
     layers = np.array([0, *moving_layers])
-    spans = []
+    top_layer = stack + 1
+    spans, top, stubs = [], [], {}
     for k, pin in enumerate(assembly.pins):
-        span = [int(layers[m]) for m in pin.members]
-        if k in cover:  # held by the cover, not by the base
-            span = [int(layers[m]) for m in pin.members if m] + [stack + 1]
-        spans.append((min(span), max(span)))
-    top = tuple(sorted(assembly.pins[k].joint for k in cover))
+        mine = sorted(int(layers[m]) for m in pin.members if m)
+        if 0 not in pin.members:
+            spans.append((mine[0], mine[-1]))
+            continue
+        passing = [int(layers[b]) for b in conflicts.blocked[k]]
+        if cover is None:
+            high = [layer for layer in mine if passing and layer > min(passing)]
+        else:
+            high = mine if k in cover else []
+        low = [layer for layer in mine if layer not in high]
+        if not low:
+            top.append(pin.joint)
+            spans.append((high[0], top_layer))
+            continue
+        spans.append((0, low[-1]))
+        if high:
+            stubs[k] = (high[0], top_layer)
     n = len(layers)
     same = (layers[:, None] == layers[None, :]) & ~np.eye(n, dtype=bool)
     same[0], same[:, 0] = False, False
     gap = (conflicts.distance[same] - sizes.link_width).min(initial=np.inf)
-    return Layout(layers, spans, top, stack + 1 + bool(top), float(gap), minimal)
+    count = stack + 1 + bool(top or stubs)
+    return Layout(layers, spans, tuple(sorted(top)), count, float(gap), minimal,
+                  cover_stubs=stubs)  # fmt: skip

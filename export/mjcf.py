@@ -32,7 +32,7 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import Layout, Plate, convex_hull, plate_points, plates, post_spans
+from .layers import Layout, Plate, convex_hull, pin_rods, plate_points, plates, post_spans
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 
@@ -175,11 +175,6 @@ class _Builder:
                           size=_fmt(self.hole / 2, (top - bottom) / 2),
                           pos=_fmt(x, y, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip
 
-    def pin(self, k: int) -> None:
-        """A pin body on its hub, spanning the layers of the parts it joins."""
-        pin = self.assembly.pins[k]
-        self.rod(pin.hub, pin.name, pin.joint, self.layout.pin_spans[k])
-
     def rod(self, part: int, name: str, joint: int, span: tuple[int, int]) -> None:
         """A pin (or a split part's shaft) as a body welded to `part`, over the layers `span`."""
         lo, hi = span
@@ -226,11 +221,11 @@ def build_mjcf(
             ET.SubElement(asset, "mesh", name=name, file=path, inertia=inertia)
     b.bodies_tree(ET.SubElement(root, "worldbody"), meshes or {})
     contact = ET.SubElement(root, "contact")
-    for k, pin in enumerate(assembly.pins):
-        b.pin(k)
-        for m in pin.members:
-            if m != pin.hub:
-                ET.SubElement(contact, "exclude", body1=pin.name, body2=assembly.parts[m].name)
+    for rod in pin_rods(assembly, layout):
+        b.rod(rod.hub, rod.name, rod.joint, rod.span)
+        for m in rod.members:
+            if m != rod.hub:
+                ET.SubElement(contact, "exclude", body1=rod.name, body2=assembly.parts[m].name)
     for shaft in layout.shafts:
         b.rod(shaft.part, shaft.name, shaft.joint, shaft.span)
     equality = ET.SubElement(root, "equality")

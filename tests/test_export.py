@@ -7,14 +7,17 @@ import pytest
 import trimesh
 
 from linkd import classic
-from linkd.export import ExportOptions, export_mechanism, hinge_angles, joint_paths
+from linkd.export import ExportOptions, export_mechanism, hinge_angles
 from linkd.export.layers import (
-    SWEEP_ANGLES,
     assign_layers,
     convex_hull,
+    find_conflicts,
     hull_edges,
+    pin_rods,
     plates,
     segment_distance,
+    stack_layers,
+    sweep,
 )
 from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
@@ -31,6 +34,22 @@ CRANK_PLATE = Mechanism(
     [(29.054, 3.317), (9.352, 0.151), (30.119, -35.315), (38.261, 7.190), (6.904, -30.185),
      (25.920, 14.455)],
     [1, 0, 1, 0, 0, 0], [(0, 1), (0, 4), (1, 3), (1, 4), (1, 5), (2, 3), (3, 5)], (0, 1), 5,
+)  # fmt: skip
+
+
+# Generated (seed 2026, no. 58 of 200): refused before ground pins could be held from both
+# plates. The crank and another link turn about ground joint 0 on either side of parts that
+# pass over it: the crank on a pin standing in the base, the link on a stub from the cover.
+SPLIT_GROUND = Mechanism(
+    [(-61.366, -20.081), (-97.844, 6.461), (56.736, -27.458), (12.241, 80.915), (-9.267, -54.538),
+     (-10.649, 24.046), (-49.631, 89.019), (-72.872, -8.282), (-43.573, 17.223), (-47.268, 28.713),
+     (67.227, 84.743), (47.272, -62.57), (-71.128, -93.505), (81.673, 1.285), (38.959, 15.456),
+     (38.409, 64.656), (53.482, -54.914), (-25.009, 96.707), (34.203, 27.156), (33.14, -72.062)],
+    [1, 0, 1, 0, 1, 0, 0, 0, 0, 0, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 6), (1, 3), (1, 5), (1, 9), (2, 3), (2, 7), (2, 8), (2, 9), (3, 13), (4, 5),
+     (4, 17), (5, 6), (5, 19), (6, 7), (6, 18), (7, 8), (7, 14), (7, 19), (8, 18), (9, 11),
+     (9, 15), (10, 11), (12, 13), (12, 14), (13, 15), (13, 16), (14, 16), (16, 17)],
+    (0, 1), 19,
 )  # fmt: skip
 
 
@@ -105,8 +124,9 @@ def test_convex_hull_is_counter_clockwise_and_drops_interior_points():
 def _swept_layout(mech):
     assembly = assemble(mech)
     sizes = resolve_sizes(mech, assembly.parts, None)
-    paths = joint_paths(mech, np.arange(SWEEP_ANGLES) * (2 * np.pi / SWEEP_ANGLES))
-    return assembly, sizes, paths, assign_layers(assembly, paths, sizes)
+    paths = sweep(mech, sizes.link_width)
+    conflicts = find_conflicts(assembly, paths, sizes)
+    return assembly, sizes, paths, stack_layers(assembly, conflicts, sizes, stubs=True)
 
 
 def _dense_outline(assembly, part, paths, per_edge=20):
@@ -116,10 +136,13 @@ def _dense_outline(assembly, part, paths, per_edge=20):
     return np.concatenate([paths[a] + t * (paths[b] - paths[a]) for a, b in edges])
 
 
-@pytest.mark.parametrize("build", [classic.jansen_leg, classic.watt_six_bar, lambda: CRANK_PLATE])
+@pytest.mark.parametrize(
+    "build", [classic.jansen_leg, classic.watt_six_bar, lambda: CRANK_PLATE, lambda: SPLIT_GROUND]
+)
 def test_parts_of_one_layer_stay_apart_and_pins_clear(build):
     """Brute force over the sweep: plates sharing a layer keep a width plus the clearance
-    between their joint hulls; no pin crosses a layer where a part it does not join passes."""
+    between their joint hulls; no pin (or stub of one) crosses a layer where a part it does not
+    join passes."""
     mech = build()
     assembly, sizes, paths, layout = _swept_layout(mech)
     n = len(assembly.parts)
@@ -129,10 +152,11 @@ def test_parts_of_one_layer_stay_apart_and_pins_clear(build):
             if layout.layers[p] == layout.layers[q]:
                 gap = np.linalg.norm(outline[p][:, None] - outline[q][None], axis=-1).min()
                 assert gap >= sizes.link_width + sizes.clearance
-    for pin, (lo, hi) in zip(assembly.pins, layout.pin_spans):
+    for rod in pin_rods(assembly, layout):
+        lo, hi = rod.span
         for q in range(1, n):
-            if q not in pin.members and lo <= layout.layers[q] <= hi:
-                gap = np.linalg.norm(outline[q] - paths[pin.joint], axis=-1).min()
+            if q not in rod.members and lo <= layout.layers[q] <= hi:
+                gap = np.linalg.norm(outline[q] - paths[rod.joint], axis=-1).min()
                 assert gap >= (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance
 
 
@@ -146,6 +170,29 @@ def test_ground_pins_stand_in_the_base_or_hang_from_the_cover():
             assert lo == 0 or hi == layout.count - 1
     jansen = _swept_layout(classic.jansen_leg())[3]
     assert jansen.top_joints == () and jansen.minimal
+
+
+def test_a_ground_pin_held_from_both_plates_is_two_stubs_either_side_of_the_passing_parts():
+    """Where neither base nor cover can hold a ground pin whole, its parts below the parts that
+    pass over the joint turn on a pin standing in the base, those above on a stub hanging from
+    the cover; the two stubs leave the passing parts' layers free."""
+    assembly, sizes, paths, layout = _swept_layout(SPLIT_GROUND)
+    with pytest.raises(ValueError, match="flat layers"):  # whole ground pins
+        assign_layers(assembly, paths, sizes)
+    assert layout.cover_stubs and not layout.brackets and not layout.arms
+    top = layout.count - 1
+    for k, (lo, hi) in layout.cover_stubs.items():
+        pin = assembly.pins[k]
+        base = layout.pin_spans[k]
+        assert 0 in pin.members and base[0] == 0 and hi == top
+        rods = [r for r in pin_rods(assembly, layout) if r.joint == pin.joint]
+        assert [r.name for r in rods] == [pin.name, f"{pin.name}_top"]
+        below, above = ({m for m in r.members if m} for r in rods)
+        assert below and above and below | above == set(pin.members) - {0}
+        between = [q for q in range(1, len(assembly.parts)) if base[1] < layout.layers[q] < lo]
+        assert between  # a pin whole from either plate would cross these
+    cover = next(p for p in plates(assembly, layout) if p.name == "ground_cover")
+    assert {assembly.pins[k].joint for k in layout.cover_stubs} <= set(cover.joints)
 
 
 def test_reflected_rotated_mechanism_has_the_same_parts_and_layers():

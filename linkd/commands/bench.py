@@ -167,8 +167,8 @@ def generator(args: argparse.Namespace) -> int:
 
 def export(args: argparse.Namespace) -> int:
     """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
-    tangled for flat layers, straight, bent or split on a bracket, is refused by the export and
-    counted as such."""
+    tangled for flat layers, straight, bent, split, on brackets or on ground stubs, is refused
+    by the export and counted as such."""
     import tempfile
     from collections import Counter
 
@@ -201,15 +201,21 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which with narrower links"] += 1
         if report.passed and any("bends" in part for part in result.parts):
             outcome["  of which with bent links"] += 1
+        if report.passed and any("arm_of" in part for part in result.parts):
+            outcome["  of which with split plates"] += 1
         if report.passed and any(part["kind"] == "post" for part in result.parts):
             outcome["  of which on a bracket"] += 1
+        pins = [part["joints"][0] for part in result.parts if part["kind"] == "pin"]
+        if report.passed and len(set(pins)) < len(pins):  # a pin and a stub at one joint
+            outcome["  of which on ground stubs"] += 1
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
-                 "  of which on a bracket", "  of which with a finer step", "failed verification",
-                 "refused (no flat layering)"):  # fmt: skip
+                 "  of which with split plates", "  of which on a bracket",
+                 "  of which on ground stubs", "  of which with a finer step",
+                 "failed verification", "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
             print(f"  {name:28s} {outcome[name]}")
     if failed:

@@ -1,0 +1,57 @@
+"""Ground pins held from both plates (linkd.export.layers): a mechanism no whole ground pin lets
+layer is built with a pin in the base and a stub from the cover, verified, and a stub moved
+onto a passing part's layer is caught."""
+
+import xml.etree.ElementTree as ET
+
+import pytest
+import trimesh
+from test_export import SPLIT_GROUND
+
+from linkd.export import export_mechanism
+from linkd.verify import verify_output
+
+
+@pytest.fixture(scope="module")
+def split_ground(tmp_path_factory):
+    out = tmp_path_factory.mktemp("split_ground")
+    return out, export_mechanism(SPLIT_GROUND, out, {"mjcf", "stl"})
+
+
+def test_the_two_stubs_are_built_and_verified(split_ground):
+    out, result = split_ground
+    parts = {p["name"]: p for p in result.parts}
+    assert not any("arm_of" in p or p["kind"] == "post" for p in result.parts)
+    base, stub = parts["pin_0"], parts["pin_0_top"]
+    cover = parts["ground_cover"]
+    assert base["layers"][0] == 0 and stub["layers"][1] == cover["layer"] == result.layers - 1
+    assert base["joins"] == ["ground", "link_0_1"] and stub["joins"] == ["ground", "link_0_6"]
+    assert 0 in parts["ground"]["joints"] and 0 in cover["joints"]
+    for name in ("pin_0", "pin_0_top"):  # each stub reaches exactly the plates it joins
+        layers = [parts[j]["layer"] for j in parts[name]["joins"] if j != "ground"]
+        ground = 0 if name == "pin_0" else cover["layer"]
+        assert parts[name]["layers"] == [min(*layers, ground), max(*layers, ground)]
+    for part in result.parts:
+        if "mesh" in part:
+            solid = trimesh.load(out / part["mesh"])
+            assert solid.is_watertight and solid.is_volume
+    report = verify_output(out, write=False)
+    assert report.passed, report.failed
+
+
+def test_a_stub_lowered_onto_a_passing_part_is_caught(split_ground, tmp_path):
+    """The cover's stub at joint 0 moved down to the layer of link_1_3, which passes over the
+    joint between the two stubs: verification must name the stub."""
+    out, _ = split_ground
+    for path in out.iterdir():
+        (tmp_path / path.name).symlink_to(path)
+    (tmp_path / "mechanism.xml").unlink()
+    tree = ET.parse(out / "mechanism.xml")
+    geoms = {g.get("name"): g for g in tree.iter("geom")}
+    stub, passing = geoms["pin_0_top"], geoms["link_1_3"]
+    x, y, _ = stub.get("pos").split()
+    stub.set("pos", f"{x} {y} {passing.get('pos').split()[2]}")
+    tree.write(tmp_path / "mechanism.xml")
+    report = verify_output(tmp_path, write=False)
+    assert "collisions" in report.failed
+    assert "pin_0_top" in next(c.detail for c in report.checks if c.name == "collisions")
