@@ -121,12 +121,13 @@ def test_convex_hull_is_counter_clockwise_and_drops_interior_points():
     assert sorted(convex_hull(np.array([[0, 0], [2, 0], [1, 0]]))) == [0, 1]
 
 
-def _swept_layout(mech):
+def _swept_layout(mech, stubs: bool = False):
+    """Layers as `assign_layers` finds them (stubs: with ground stubs allowed, as `braced`)."""
     assembly = assemble(mech)
     sizes = resolve_sizes(mech, assembly.parts, None)
     paths = sweep(mech, sizes.link_width)
     conflicts = find_conflicts(assembly, paths, sizes)
-    return assembly, sizes, paths, stack_layers(assembly, conflicts, sizes, stubs=True)
+    return assembly, sizes, paths, stack_layers(assembly, conflicts, sizes, stubs=stubs)
 
 
 def _dense_outline(assembly, part, paths, per_edge=20):
@@ -137,14 +138,16 @@ def _dense_outline(assembly, part, paths, per_edge=20):
 
 
 @pytest.mark.parametrize(
-    "build", [classic.jansen_leg, classic.watt_six_bar, lambda: CRANK_PLATE, lambda: SPLIT_GROUND]
-)
-def test_parts_of_one_layer_stay_apart_and_pins_clear(build):
+    ("build", "stubs"),
+    [(classic.jansen_leg, False), (classic.watt_six_bar, False), (lambda: CRANK_PLATE, False),
+     (lambda: SPLIT_GROUND, True)],
+)  # fmt: skip
+def test_parts_of_one_layer_stay_apart_and_pins_clear(build, stubs):
     """Brute force over the sweep: plates sharing a layer keep a width plus the clearance
     between their joint hulls; no pin (or stub of one) crosses a layer where a part it does not
     join passes."""
     mech = build()
-    assembly, sizes, paths, layout = _swept_layout(mech)
+    assembly, sizes, paths, layout = _swept_layout(mech, stubs)
     n = len(assembly.parts)
     outline = [_dense_outline(assembly, p, paths) for p in range(n)]
     for p in range(1, n):
@@ -176,7 +179,7 @@ def test_a_ground_pin_held_from_both_plates_is_two_stubs_either_side_of_the_pass
     """Where neither base nor cover can hold a ground pin whole, its parts below the parts that
     pass over the joint turn on a pin standing in the base, those above on a stub hanging from
     the cover; the two stubs leave the passing parts' layers free."""
-    assembly, sizes, paths, layout = _swept_layout(SPLIT_GROUND)
+    assembly, sizes, paths, layout = _swept_layout(SPLIT_GROUND, stubs=True)
     with pytest.raises(ValueError, match="flat layers"):  # whole ground pins
         assign_layers(assembly, paths, sizes)
     assert layout.cover_stubs and not layout.brackets and not layout.arms
