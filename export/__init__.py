@@ -25,7 +25,7 @@ from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
-from .layers import Layout, assign_layers, pin_rods, plate_points, plates, post_spans, sweep
+from .layers import Layout, assign_layers, plate_points, plates, post_spans, sweep
 from .mjcf import (
     PROBE_DENSITY,
     TIMESTEP,
@@ -38,6 +38,7 @@ from .mjcf import (
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
+from .rods import pin_rods
 from .routing import bent_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",

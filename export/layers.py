@@ -95,42 +95,7 @@ class Layout:
     arms: dict[int, tuple[Arm, ...]] = field(default_factory=dict)  # split parts (`braced`)
     brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
     shafts: tuple[Shaft, ...] = ()  # split parts' own pins at joints no other part shares
-    cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `pin_rods`
-
-
-@dataclass(frozen=True)
-class Rod:
-    """A pin as made: a rod fixed in part `hub` over the layers `span`, through the holes of
-    `members` (hub included)."""
-
-    name: str
-    joint: int
-    hub: int
-    members: tuple[int, ...]
-    span: tuple[int, int]
-
-
-def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
-    """Every pin's rod. A ground pin whose parts are held from both plates (`cover_stubs`: pin
-    index to the span of its stub from the cover) is two: `pin_spans` standing in the base, its
-    stub (`<name>_top`) hanging from the cover, each through the parts within its span."""
-    rods = []
-    for k, pin in enumerate(assembly.pins):
-        if k not in layout.cover_stubs:
-            rods.append(Rod(pin.name, pin.joint, pin.hub, pin.members, layout.pin_spans[k]))
-            continue
-        stubs = {pin.name: layout.pin_spans[k], f"{pin.name}_top": layout.cover_stubs[k]}
-        for name, (lo, hi) in stubs.items():
-            inside = [m for m in pin.members if lo <= _layer_at(layout, m, pin.joint) <= hi]
-            members = tuple(m for m in pin.members if m == pin.hub or m in inside)
-            rods.append(Rod(name, pin.joint, pin.hub, members, (lo, hi)))
-    return rods
-
-
-def _layer_at(layout: Layout, part: int, joint: int) -> int:
-    """The layer of a part's plate at one of its joints (a split part's arm there)."""
-    arms = [arm.layer for arm in layout.arms.get(part, ()) if joint in arm.joints]
-    return arms[0] if arms else int(layout.layers[part])
+    cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `rods.pin_rods`
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,6 @@ from linkd.export.layers import (
     convex_hull,
     find_conflicts,
     hull_edges,
-    pin_rods,
     plates,
     segment_distance,
     stack_layers,
@@ -22,6 +21,7 @@ from linkd.export.layers import (
 from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import CRANK, assemble, rigid_parts
+from linkd.export.rods import pin_rods
 from linkd.geometry import Similarity, rotation
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
