@@ -63,18 +63,18 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     conflicts = find_conflicts(union, extended, sizes)
     bracket = _best_brackets(conflicts, roles)
 
-    def layered(split: dict[int, int], held: tuple[int, ...], bound: bool = False):
+    def layered(split: dict[int, int], held: tuple[int, ...], relaxed: bool = False):
         keep = [q for q, role in enumerate(roles)
                 if (role[0] == "part" and role[1] not in split)
                 or (role[0] == "arm" and split.get(role[1]) == role[2])
                 or q in [bracket[g] for g in held]]  # fmt: skip
-        chosen, share = _subset(union, conflicts, keep, held, ground if bound else ())
+        chosen, share = _subset(union, conflicts, keep, held, ground if relaxed else ())
         arms = [sum(roles[keep[m]][0] == "arm" for m in pin.members) for pin in chosen.pins]
         shafts = [k for k, count in enumerate(arms) if count >= 2]  # stay whole at the ground
         return stack_layers(chosen, share, sizes, stubs=True, whole=shafts), keep, chosen
 
     try:  # every plate left out, no ground pin at all: looser than any choice
-        layered({q: -1 for q in plates}, (), bound=True)
+        layered({q: -1 for q in plates}, (), relaxed=True)
     except NoFlatLayers as exc:
         if exc.proved:
             raise
@@ -92,7 +92,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
             if k not in loose:
                 searches += 1
                 try:
-                    layered(split, (), bound=True)
+                    layered(split, (), relaxed=True)
                     loose[k] = True
                 except NoFlatLayers as exc:
                     loose[k], refusal = False if exc.proved else None, refusal or exc
