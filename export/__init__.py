@@ -5,7 +5,7 @@
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
-`routing`; where bent ones cannot either, plates split into arms on a shaft and ground pins
+`routing`; where bent ones cannot either, plates are cut into arms and ground pins
 are held by brackets or as two stubs from base and cover, `braced`), plates become STL meshes
 (`meshes`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
 with a `scene.xml` around it (`mjcf`).
@@ -38,7 +38,7 @@ from .mjcf import (
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
-from .rods import pin_rods
+from .rods import keyed, pin_rods
 from .routing import bent_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
@@ -109,7 +109,7 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    and then plates split into arms on a shaft and ground pins are held by brackets or as
+    and then plates are cut into arms and ground pins are held by brackets or as
     stubs from both plates (`braced`, unless `options.brackets` is off). Widths the user gave
     are kept (the other constructions are still tried; ValueError when nothing works). quick:
     straight links at the first width only."""
@@ -222,7 +222,7 @@ def describe_parts(
         if plate.bends and wholes:
             entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
         out.append(entry)
-    shafts = {arms[0].joints[0]: p for p, arms in layout.arms.items()}
+    fixed = {j: p for p, arms in layout.arms.items() for j in keyed(a.joints for a in arms)}
     for rod in pin_rods(assembly, layout):
         lo, hi = rod.span
         entry = {
@@ -230,8 +230,8 @@ def describe_parts(
             "joins": [assembly.parts[m].name for m in rod.members],
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
         }  # fmt: skip
-        if rod.joint in shafts:
-            entry["fixed_in"] = assembly.parts[shafts[rod.joint]].name
+        if rod.joint in fixed:
+            entry["fixed_in"] = assembly.parts[fixed[rod.joint]].name
         out.append(entry)
     for shaft in layout.shafts:
         lo, hi = shaft.span

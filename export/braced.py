@@ -1,5 +1,5 @@
-"""Plates split into arms on a shaft, ground pins held by brackets or as stubs from both plates:
-for mechanisms no flat layering builds.
+"""Plates cut into arms, ground pins held by brackets or as stubs from both plates: for
+mechanisms no flat layering builds.
 
 In some mechanisms a part crosses, near its own joints, the pins of parts that turn about
 them: typically a ternary plate whose two couplers each sweep, in the plate's frame, a whole
@@ -8,10 +8,12 @@ that sweeps over the other two, so no order of the stack lets every ground pin r
 or the cover. Then no order of flat layers keeps every pin clear, and neither narrower nor bent
 links change that. Two constructions, in any combination, do:
 
-- a plate (a part of three or more joints) is cut into arms, one plate per joint besides a
-  shaft joint, all fixed on the pin at the shaft joint (the shaft; at a joint no other part
-  shares, a pin of the plate's own), so each part that turns about the plate's other joints
-  can have its arm on its own side of the stack;
+- a plate (a part of three or more joints) is cut into arms, each a plate of its own joining
+  two of its joints: one from a shaft joint to each other joint (a star), or else along the
+  plate's own links, any tree of them (a crankshaft: a link turning on a crankpin between the
+  two arms fixed on it), so each part that turns about the plate's joints can have its arm on
+  its own side of the stack. Wherever arms meet, the pin is fixed in them (the shaft; at a
+  joint no other part shares, a pin of the plate's own);
 - a ground pin is held by a bracket: a ground plate on a layer inside the stack with a hole for
   the pin, so the pin need not reach the base or the cover through the parts between. The
   bracket's arm runs straight out from the pivot to a post beyond everything the mechanism
@@ -22,17 +24,20 @@ The arms, brackets and posts are layered like any other parts and pins: a bracke
 link from the pivot to the post, the post a pin of the ground at a point that never moves, and
 the layer search keeps every part clear of them. Here the parts of a ground pin may also be
 held from both plates (`layers.stack_layers`, stubs), except at a split part's shaft, which
-stays whole. The clearances of every candidate (each plate whole and its arms for each shaft,
-a bracket in each direction at each ground pin) are swept once; each choice is layered from its
-share of them, the fewest brackets first, then the fewest split plates. A choice is not
-searched when the same split plates with no ground pins at all (a looser problem than any
-bracket, base, cover or stubs) are proved not to layer.
+stays whole. The clearances of every candidate (each plate whole, an arm between each two of
+its joints, a bracket in each direction at each ground pin) are swept once; each choice is
+layered from its share of them, the fewest brackets first, then the fewest split plates,
+stars first; only where no star layers are the cuts along the plates' own links searched,
+with a search budget of their own. A choice is not searched when the same split plates with
+no ground pins at all (a looser problem than any bracket, base, cover or stubs) are proved not
+to layer.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import replace
-from itertools import combinations, product
+from itertools import combinations, islice, product
 
 import numpy as np
 
@@ -48,15 +53,19 @@ from .layers import (
 )
 from .options import Sizes
 from .parts import Assembly, Part, Pin
+from .rods import keyed
 
 DIRECTIONS = 16  # directions tried for a bracket's arm
 POST_MARGIN = 2.0  # link widths between the post and the farthest point the mechanism sweeps
 MAX_SEARCHES = 300  # layer searches per width before the construction gives up
+MAX_LINK_CUTS = 100  # and then for plates cut along their own links
+MAX_LINK_SETS = 20_000  # sets of a plate's links tried as trees of arms
 
 
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with some plates split into arms on a shaft and some ground pins held by
-    brackets. ValueError when no choice layers within MAX_SEARCHES layer searches."""
+    """Layers with some plates cut into arms and some ground pins held by brackets.
+    ValueError when no choice layers within MAX_SEARCHES layer searches of stars, then
+    MAX_LINK_CUTS of cuts along the plates' own links."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, extended, roles, posts = _candidates(assembly, paths, sizes, ground)
@@ -66,7 +75,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     def layered(split: dict[int, int], held: tuple[int, ...], relaxed: bool = False):
         keep = [q for q, role in enumerate(roles)
                 if (role[0] == "part" and role[1] not in split)
-                or (role[0] == "arm" and split.get(role[1]) == role[2])
+                or (role[0] == "arm" and role[2] in split.get(role[1], ()))
                 or q in [bracket[g] for g in held]]  # fmt: skip
         chosen, share = _subset(union, conflicts, keep, held, ground if relaxed else ())
         arms = [sum(roles[keep[m]][0] == "arm" for m in pin.members) for pin in chosen.pins]
@@ -74,57 +83,119 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         return stack_layers(chosen, share, sizes, stubs=True, whole=shafts), keep, chosen
 
     try:  # every plate left out, no ground pin at all: looser than any choice
-        layered({q: -1 for q in plates}, (), relaxed=True)
+        layered({q: () for q in plates}, (), relaxed=True)
     except NoFlatLayers as exc:
         if exc.proved:
             raise
-    shafts = [[None, *assembly.parts[q].joints] for q in plates]
-    picks = product(*shafts)
-    splits = [{q: s for q, s in zip(plates, pick) if s is not None} for pick in picks]
-    splits = sorted((s for s in splits if len(set(s.values())) == len(s)), key=len)
-    loose: dict[int, bool | None] = {}  # a split layers with no ground pins (None: unknown)
-    searches, refusal = 1, None
+    stars = {q: _stars(assembly.parts[q]) for q in plates}
+    ways = {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0]) for q in plates}
     helds = [c for r in range(len(ground) + 1) for c in combinations(ground, r)]
-    for bound in (True, None):  # the splits that layer loose first, then those the search gave up
-        for held, (k, split) in product(helds, enumerate(splits)):
-            if searches >= MAX_SEARCHES:
-                break
-            if k not in loose:
+    found, refusal = _first(layered, lambda: _splits(stars), helds, MAX_SEARCHES, spent=1)
+    if found is None:  # then cut along the plates' own links too, with a budget of its own
+        def trees() -> Iterator[dict]:
+            return (s for s in _splits(ways) if any(w not in stars[q] for q, w in s.items()))
+
+        found, second = _first(layered, trees, helds, MAX_LINK_CUTS)
+        refusal = refusal or second
+    if found is not None:
+        layout, keep, chosen = found
+        return _real(assembly, layout, chosen, [roles[q] for q in keep], posts, len(paths))
+    raise refusal or ValueError("no split plates or brackets layer within the search")
+
+
+def _first(
+    layered: Callable,
+    splits: Callable[[], Iterator[dict]],
+    helds: list[tuple],
+    budget: int,
+    spent: int = 0,
+) -> tuple[tuple | None, ValueError | None]:
+    """The first of `layered(split, held)` that layers, over the ground pins `helds` on brackets
+    (the fewest first) and `splits()`, within `budget` layer searches (`spent` of them
+    already): first the splits that layer with no ground pins at all (a looser problem than
+    any bracket, base, cover or stubs), then those whose search gave up. With it, the first
+    refusal."""
+    loose: dict[int, bool | None] = {}  # a split layers with no ground pins (None: unknown)
+    searches, refusal = spent, None
+    for bound in (True, None):
+        for held in helds:
+            for k, split in enumerate(splits()):
+                if searches >= budget:
+                    return None, refusal
+                if k not in loose:
+                    searches += 1
+                    try:
+                        layered(split, (), relaxed=True)
+                        loose[k] = True
+                    except NoFlatLayers as exc:
+                        loose[k], refusal = False if exc.proved else None, refusal or exc
+                if loose[k] is not bound:
+                    continue
                 searches += 1
                 try:
-                    layered(split, (), relaxed=True)
-                    loose[k] = True
-                except NoFlatLayers as exc:
-                    loose[k], refusal = False if exc.proved else None, refusal or exc
-            if loose[k] is not bound:
-                continue
-            searches += 1
-            try:
-                layout, keep, chosen = layered(split, held)
-            except ValueError as exc:
-                refusal = refusal or exc
-                continue
-            return _real(assembly, layout, chosen, [roles[q] for q in keep], posts, len(paths))
-    raise refusal or ValueError("no split plates or brackets layer within the search")
+                    return layered(split, held), refusal
+                except ValueError as exc:
+                    refusal = refusal or exc
+    return None, refusal
+
+
+def _stars(part: Part) -> list[tuple[tuple[int, int], ...]]:
+    """A plate cut into arms from one shaft joint to each other joint, for each joint."""
+    return [tuple(tuple(sorted((s, j))) for j in part.joints if j != s) for s in part.joints]
+
+
+def _own_trees(part: Part, stars: list, points: np.ndarray) -> list[tuple[tuple[int, int], ...]]:
+    """A plate cut into arms along its own links, each a tree of them over its joints: those
+    but `stars` among the first MAX_LINK_SETS sets of links, the shortest first (`points`: the
+    joints in the assembly pose)."""
+    own = []
+    for edges in islice(combinations(part.links, len(part.joints) - 1), MAX_LINK_SETS):
+        root = {j: j for j in part.joints}
+        for u, v in edges:
+            while root[u] != u:
+                u = root[u]
+            while root[v] != v:
+                v = root[v]
+            if u == v:
+                break
+            root[u] = v
+        else:
+            if edges not in stars:
+                own.append(edges)
+    length = [sum(np.linalg.norm(points[u] - points[v]) for u, v in tree) for tree in own]
+    return [own[k] for k in np.argsort(length, kind="stable")]
+
+
+def _splits(trees: dict[int, list[tuple]]) -> Iterator[dict[int, tuple]]:
+    """Every choice of split plates (`trees`: each plate's ways to cut it) in the order of the
+    product of [None, *ways] over the plates, the fewest split plates first, but where two
+    plates would be fixed on one pin (they would turn as one)."""
+    plates = list(trees)
+    for count in range(len(plates) + 1):
+        chosen = combinations(range(len(plates)), count)
+        for picked in sorted(chosen, key=lambda c: [k in c for k in range(len(plates))]):
+            for ways in product(*(trees[plates[k]] for k in picked)):
+                fixed = [keyed(way) for way in ways]
+                if sum(map(len, fixed)) == len(set().union(*fixed)):
+                    yield {plates[k]: way for k, way in zip(picked, ways)}
 
 
 def _candidates(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, ground: tuple[int, ...]
 ) -> tuple[Assembly, np.ndarray, list[tuple], np.ndarray]:
-    """Every candidate part as the layer search sees it: the real parts, every plate's arms for
-    each shaft joint (a link from the shaft to one more joint), and a bracket for each ground
-    pin and direction (a static link from the pivot to its post, a point appended to the
-    paths). The pins are those of the real assembly with every candidate at their joint for
-    members, then a shaft at each plate joint no pin is at (it lapses unless the plate is split
-    there), then each post, a pin of the ground. Returns it, the extended paths, each
-    candidate's role (("part", q), ("arm", q, shaft) or ("bracket", joint, post)) and the
-    posts (B, 2)."""
+    """Every candidate part as the layer search sees it: the real parts, an arm between each
+    two joints of every plate (a link), and a bracket for each ground pin and direction (a
+    static link from the pivot to its post, a point appended to the paths). The pins are those
+    of the real assembly with every candidate at their joint for members, then a shaft at each
+    plate joint no pin is at (it lapses unless two arms of the plate meet there), then each
+    post, a pin of the ground. Returns it, the extended paths, each candidate's role
+    (("part", q), ("arm", q, (joint, joint)) or ("bracket", joint, post)) and the posts
+    (B, 2)."""
     parts, roles = list(assembly.parts), [("part", q) for q in range(len(assembly.parts))]
     for q, part in enumerate(assembly.parts):
-        for shaft in part.joints if part.kind == "plate" else ():
-            for j in (j for j in part.joints if j != shaft):
-                parts.append(Part(f"{part.name}_arm{shaft}_{j}", "link", (shaft, j)))
-                roles.append(("arm", q, shaft))
+        for u, v in combinations(part.joints, 2) if part.kind == "plate" else ():
+            parts.append(Part(f"{part.name}_arm{u}_{v}", "link", (u, v)))
+            roles.append(("arm", q, (u, v)))
     angles = np.arange(DIRECTIONS) * (2 * np.pi / DIRECTIONS)
     circle = np.stack([np.cos(angles), np.sin(angles)], -1)
     margin = POST_MARGIN * sizes.link_width
@@ -212,8 +283,7 @@ def _real(
         if role[0] == "arm":
             arms.setdefault(role[1], []).append(Arm(part.joints, layer))
         layers[role[1]] = min(layers[role[1]] or layer, layer)
-    split = {role[2]: role[1] for role in roles if role[0] == "arm"}
-    shafts = tuple(Shaft(split[pin.joint], pin.joint, span)
+    shafts = tuple(Shaft(roles[pin.hub][1], pin.joint, span)  # the hub: an arm of the part
                    for pin, span in zip(chosen.pins, layout.pin_spans)
                    if pin.name.startswith("shaft_"))  # fmt: skip
     top = tuple(j for j in layout.top_joints if j < first)

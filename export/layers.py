@@ -44,9 +44,9 @@ MAX_COVER_TRIES = 4  # choices of ground pins hanging from a cover plate, per la
 
 @dataclass(frozen=True)
 class Arm:
-    """One plate of a part split into arms on a shaft: the shaft joint and one more joint."""
+    """One plate of a part split into arms: a bar between two of the part's joints."""
 
-    joints: tuple[int, int]  # (shaft, other joint)
+    joints: tuple[int, int]
     layer: int
 
 

@@ -28,6 +28,7 @@ class Part:
     name: str
     kind: str
     joints: tuple[int, ...]
+    links: tuple[tuple[int, int], ...] = ()  # a plate's: the mechanism's links holding it rigid
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,8 @@ def rigid_parts(mech: Mechanism) -> list[Part]:
     moving = sorted(tuple(sorted(c)) for c in clusters[1:])
     names = [("link_" if len(j) == 2 else "plate_") + "_".join(map(str, j)) for j in moving]
     kinds = ["link" if len(j) == 2 else "plate" for j in moving]
-    return [ground, *(Part(n, k, j) for n, k, j in zip(names, kinds, moving))]
+    links = [tuple(e for e in mech.links if len(j) > 2 and set(e) <= set(j)) for j in moving]
+    return [ground, *(Part(*fields) for fields in zip(names, kinds, moving, links))]
 
 
 def _merge_rigid(clusters: list[set[int]]) -> bool:

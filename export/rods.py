@@ -3,6 +3,8 @@ base and the cover (stubs, `layers.stack_layers`)."""
 
 from __future__ import annotations
 
+from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from .layers import Layout
@@ -42,3 +44,10 @@ def _layer_at(layout: Layout, part: int, joint: int) -> int:
     """The layer of a part's plate at one of its joints (a split part's arm there)."""
     arms = [arm.layer for arm in layout.arms.get(part, ()) if joint in arm.joints]
     return arms[0] if arms else int(layout.layers[part])
+
+
+def keyed(arms: Iterable[tuple[int, int]]) -> set[int]:
+    """The joints where two or more arms of a split part meet: the pins there are fixed in the
+    arms, which so turn as one rigid part."""
+    count = Counter(j for arm in arms for j in arm)
+    return {j for j, n in count.items() if n >= 2}

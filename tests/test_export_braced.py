@@ -55,7 +55,8 @@ def _refused_flat_and_bent(mech: Mechanism) -> None:
 
 def _check_parts(out, parts: list[dict]) -> None:
     """Every plate a watertight solid; every pin reaches exactly the plates with its hole; the
-    arms of a split part all turn on the one shaft, fixed in the part."""
+    arms of a split part are a tree over its joints, and the pins where arms meet are fixed in
+    the part (so they turn as one)."""
     for part in parts:
         if "mesh" in part:
             solid = trimesh.load(out / part["mesh"])
@@ -68,11 +69,15 @@ def _check_parts(out, parts: list[dict]) -> None:
     split = {p["arm_of"] for p in parts if "arm_of" in p}
     assert split
     for name in split:
-        arms = [p for p in parts if p.get("arm_of") == name]
-        shaft = {p["joints"][0] for p in arms}
-        assert len(shaft) == 1 and len(arms) >= 2
-        pin = next(p for p in parts if p["kind"] == "pin" and p["joints"] == list(shaft))
-        assert pin["fixed_in"] == name
+        arms = [p["joints"] for p in parts if p.get("arm_of") == name]
+        joints = {int(j) for j in name.split("_")[1:]}
+        reached = set(arms[0])
+        while any(set(arm) & reached and not set(arm) <= reached for arm in arms):
+            reached |= set(next(a for a in arms if set(a) & reached and not set(a) <= reached))
+        assert len(arms) == len(joints) - 1 and reached == joints
+        meet = {j for j in joints if sum(j in arm for arm in arms) >= 2}
+        pins = {p["joints"][0]: p.get("fixed_in") for p in parts if p["kind"] == "pin"}
+        assert meet and all(pins[j] == name for j in meet)
 
 
 def test_a_crank_refused_flat_and_bent_is_built_split_and_verified(knotted):
