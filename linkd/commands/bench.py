@@ -203,6 +203,12 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which with bent links"] += 1
         if report.passed and any("arm_of" in part for part in result.parts):
             outcome["  of which with split plates"] += 1
+        arms: dict[str, list[set]] = {}
+        for part in result.parts:
+            if "arm_of" in part:
+                arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
+        if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
+            outcome["    cut along their links"] += 1  # not a star: no joint in every arm
         if report.passed and any(part["kind"] == "post" for part in result.parts):
             outcome["  of which on a bracket"] += 1
         pins = [part["joints"][0] for part in result.parts if part["kind"] == "pin"]
@@ -213,7 +219,8 @@ def export(args: argparse.Namespace) -> int:
         failed.update(report.failed)
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
-                 "  of which with split plates", "  of which on a bracket",
+                 "  of which with split plates", "    cut along their links",
+                 "  of which on a bracket",
                  "  of which on ground stubs", "  of which with a finer step",
                  "failed verification", "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
