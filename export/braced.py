@@ -72,7 +72,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     conflicts = find_conflicts(union, extended, sizes)
     bracket = _best_brackets(conflicts, roles)
 
-    def layered(split: dict[int, int], held: tuple[int, ...], relaxed: bool = False):
+    def layered(split: dict[int, tuple], held: tuple[int, ...], relaxed: bool = False):
         keep = [q for q, role in enumerate(roles)
                 if (role[0] == "part" and role[1] not in split)
                 or (role[0] == "arm" and role[2] in split.get(role[1], ()))
