@@ -25,7 +25,7 @@ from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
-from .layers import Layout, assign_layers, plate_points, plates, post_spans, sweep
+from .layers import Layout, assign_layers, find_conflicts, plate_points, plates, post_spans, sweep
 from .mjcf import (
     PROBE_DENSITY,
     TIMESTEP,
@@ -38,6 +38,7 @@ from .mjcf import (
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
+from .refusal import blocking_pins
 from .rods import keyed, pin_rods
 from .routing import bent_layers
 
@@ -129,7 +130,19 @@ def _layered(
             except ValueError as exc:
                 first = first or exc
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
-    raise ValueError(f"{first} (straight, bent and split links{widths} tried)")
+    culprits = ""
+    if not quick:  # which pins, for the designer to move: found at the narrowest width tried
+        narrowest = tries[-1]
+        conflicts = find_conflicts(assembly, sweep(mech, narrowest.link_width), narrowest)
+        pins = blocking_pins(assembly, conflicts, narrowest)
+        if pins:
+            culprits = f"; with straight parts, {_listed(pins)} alone cannot all be kept clear"
+    raise ValueError(f"{first} (straight, bent and split links{widths} tried{culprits})")
+
+
+def _listed(names: list[str]) -> str:
+    """"a", "a and b", "a, b and c"."""
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def _write_meshes(

@@ -1,15 +1,18 @@
 """Bent links (linkd.export.routing): routes round pin paths, a mechanism that straight links
-cannot layer built and verified, and a straightened bent link caught by verification."""
+cannot layer built and verified, a straightened bent link caught by verification, and what a
+refusal says."""
 
+import re
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import trimesh
 from test_export_narrow import SNARLED, TANGLED
 
-from linkd.export import ExportOptions, export_mechanism
-from linkd.export.layers import assign_layers, sweep
+from linkd.export import NARROWER, ExportOptions, export_mechanism
+from linkd.export.layers import NoFlatLayers, assign_layers, find_conflicts, stack_layers, sweep
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
 from linkd.export.routing import clearance, route
@@ -91,3 +94,29 @@ def test_what_bending_cannot_save_is_refused_in_one_line(tmp_path):
     with pytest.raises(ValueError, match=message) as refusal:
         export_mechanism(SNARLED, tmp_path, {"mjcf"})
     assert "\n" not in str(refusal.value)
+
+
+def test_a_refusal_names_pins_that_alone_cannot_be_kept_clear(tmp_path):
+    """The pins named can be built round by no stack of straight parts at the narrowest width,
+    and each of them is needed for that: without any one, the others layer."""
+    with pytest.raises(ValueError) as refusal:
+        export_mechanism(SNARLED, tmp_path, {"mjcf"})
+    named = re.search(r"with straight parts, (.*) alone cannot", str(refusal.value)).group(1)
+    names = re.findall(r"pin_\d+", named)
+    assembly = assemble(SNARLED)
+    usual = resolve_sizes(SNARLED, assembly.parts, None).link_width
+    sizes = resolve_sizes(SNARLED, assembly.parts, ExportOptions(link_width=usual * NARROWER[-1]))
+    conflicts = find_conflicts(assembly, sweep(SNARLED, sizes.link_width), sizes)
+    index = {pin.name: k for k, pin in enumerate(assembly.pins)}
+    assert 2 <= len(names) < len(assembly.pins)
+
+    def layer(pins: list[str]) -> None:
+        keep = [index[name] for name in pins]
+        chosen = replace(assembly, pins=[assembly.pins[k] for k in keep])
+        stack_layers(chosen, replace(conflicts, blocked=[conflicts.blocked[k] for k in keep]),
+                     sizes)  # fmt: skip
+
+    with pytest.raises(NoFlatLayers):
+        layer(names)
+    for name in names:
+        layer([other for other in names if other != name])
