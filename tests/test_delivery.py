@@ -14,22 +14,24 @@ from linkd.design import pipeline
 from linkd.design.output import SKIP_REASONS
 from linkd.design.pipeline import DesignOptions, NoDesign, _ranked
 from linkd.design.propose import Candidates
-from linkd.design.select import end_effector_path
+from linkd.design.select import end_effector_path, measure
 from linkd.design.stages import Stages
 from linkd.geometry import Similarity
 
 ROCKER = classic.crank_rocker()
 
 
-def _delivered(mechanisms, folder, **options):
-    """The design delivered from `mechanisms`, ranked in that order, and what was skipped."""
+def _delivered(mechanisms, folder, passed=None, **options):
+    """The design delivered from `mechanisms`, ranked in that order, and what was skipped
+    (those tried and passed over listed in `passed`)."""
     batch = LinkageBatch.from_mechanisms(mechanisms)
     candidates = Candidates(batch, np.arange(len(mechanisms)) * 0.1)
     skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))
     points = end_effector_path(ROCKER)[0]
     found, _, _ = pipeline._deliver(candidates, Similarity(), points,
                                     DesignOptions(formats=frozenset({"mjcf"}), **options),
-                                    Stages(False), folder, {}, skipped, np.inf)  # fmt: skip
+                                    Stages(False), folder, {}, skipped, np.inf,
+                                    passed)  # fmt: skip
     return found.mechanism, skipped
 
 
@@ -50,8 +52,12 @@ def test_after_a_refusal_designs_are_checked_quickly_before_a_try(tmp_path, monk
 
 def test_without_the_quick_checks_the_slower_constructions_are_tried(tmp_path, monkeypatch):
     monkeypatch.setattr(pipeline, "QUICK_AFTER", 10)
-    found, skipped = _delivered([STUBBORN, TANGLED, ROCKER], tmp_path)
+    passed = []
+    found, skipped = _delivered([STUBBORN, TANGLED, ROCKER], tmp_path, passed)
     assert _same(found, TANGLED) and skipped["unbuildable"] == 1
+    # what was given up is in plain view: the refused design and its curve error
+    error = measure(STUBBORN, end_effector_path(ROCKER)[0]).chamfer
+    assert passed == [{"reason": "unbuildable", "chamfer": pytest.approx(error)}]
 
 
 def test_delivery_gives_up_after_its_quick_checks(tmp_path, monkeypatch):

@@ -15,6 +15,8 @@ from linkd.paths import PATH_KINDS
 
 STRATEGIES = ("node", "graph", "oneshot")
 PROPOSERS = ("model", "random")
+PASSED_OVER = {"invalid": "invalid", "unbuildable": "no stack of flat layers builds it",
+               "failed_verification": "it failed verification in MuJoCo"}  # fmt: skip
 
 DESCRIPTION = """\
 Design a one-degree-of-freedom planar linkage whose end effector traces the
@@ -191,6 +193,10 @@ def run(args: argparse.Namespace) -> int:
     width, height = m.footprint
     print(f"  footprint {width:.4g} x {height:.4g} {args.units}, "
           f"worst transmission angle {m.worst_transmission_deg:.1f} deg")  # fmt: skip
+    best = r["search"].get("best_passed_over")
+    if best:  # the accuracy given up, in plain view
+        error = f" (curve error {best['chamfer']:.4f})" if "chamfer" in best else ""
+        print(f"  a better-ranked design{error} was passed over: {PASSED_OVER[best['reason']]}")
     if "constraints" in r:
         print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
     for alt in outcome.alternatives:

@@ -182,6 +182,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "rounds_run": outcome.report["search"].get("rounds_run"),
         "default_search": outcome.report["search"].get("default_search"),
         "skipped": dict(outcome.report["search"].get("skipped", {})),
+        "passed_over": outcome.report["search"].get("best_passed_over", {}).get("chamfer"),
         "timings": dict(outcome.report.get("timings", {})),
     }
     if outcome.design is not None and outcome.design.mechanism.crank_range is not None:
@@ -194,7 +195,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
 
 def _refused_row(file: Path, reason: str, seconds: float) -> dict:
     keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation", "floor",
-            "timing_error", "found_by")  # fmt: skip
+            "timing_error", "found_by", "passed_over")  # fmt: skip
     return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
             "verified": False, "seconds": seconds, "sources": {}, "skipped": {},
             "timings": {}, "reason": reason}  # fmt: skip
@@ -237,6 +238,7 @@ def totals(rows: list[dict]) -> dict:
         **_held(rows),
         "skipped": {why: sum(r["skipped"].get(why, 0) for r in rows) for why in SKIP_REASONS},
         "best_skipped": sum(any(r["skipped"].values()) for r in rows),
+        "passed_over": [(r["passed_over"], r["chamfer"]) for r in rows if r.get("passed_over")],
         "found_by": {name: sum(r["found_by"] == name for r in rows)
                      for name in sorted({r["found_by"] for r in rows if r["found_by"]})},
         "stages": stages(rows),
@@ -329,7 +331,9 @@ def summary_table(total: dict) -> str:
         ("stage seconds", "median " + (", ".join(f"{k} {v:.1f}"
                                                  for k, v in t["stage_seconds"].items()) or "-")),
         ("skipped", f"{t['best_skipped']} curves' best designs passed over: "
-                    + ", ".join(f"{k} {v}" for k, v in t["skipped"].items())),
+                    + ", ".join(f"{k} {v}" for k, v in t["skipped"].items())
+                    + ("; curve error {:.4f} passed over, {:.4f} delivered (means)".format(
+                        *np.mean(t["passed_over"], 0)) if t["passed_over"] else "")),
         ("found by", ", ".join(f"{k} {v}" for k, v in t["found_by"].items()) or "-"),
         ("stages", ", ".join(f"{k} {v:.4f}" for k, v in t["stages"].items()) or "-"),
     ]  # fmt: skip

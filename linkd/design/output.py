@@ -51,29 +51,33 @@ def deliver(
     timed: bool = False,
     skipped: Counter | None = None,
     brackets: bool = True,
+    passed: list[dict] | None = None,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
     fails any step, counted in `skipped` by the step ("invalid", "unbuildable": the export
-    refused it, "failed_verification"). `target` is the user's curve, in the mechanism's frame
+    refused it, "failed_verification") and listed in `passed` with its curve error once
+    measured (what the user gives up). `target` is the user's curve, in the mechanism's frame
     (`timed`: its rows equally spaced in time; `brackets`: whether the export may split
     plates and hold ground pins on brackets)."""
     skipped = Counter() if skipped is None else skipped
+    passed = [] if passed is None else passed
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
         skipped["invalid"] += 1
+        passed.append({"reason": "invalid"})
         return None
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
     try:
         export, report = export_verified(mech, folder, set(formats) | {"mjcf"},
                                          ExportOptions(brackets=brackets))
+        why = None if report.passed else "failed_verification"
     except ValueError:
+        why = "unbuildable"
+    if why:
         _empty(folder)
-        skipped["unbuildable"] += 1
-        return None
-    if not report.passed:
-        _empty(folder)
-        skipped["failed_verification"] += 1
+        skipped[why] += 1
+        passed.append({"reason": why, "chamfer": measures.chamfer})
         return None
     return Delivered(mech, measures, export, report, folder)
 

@@ -147,8 +147,11 @@ def design(
             skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))  # better designs passed over
             report_search["skipped"] = skipped
             ends = start + o.time_budget
+            passed: list[dict] = []  # the designs passed over, best first
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
-                                                     source, skipped, ends)  # fmt: skip
+                                                     source, skipped, ends, passed)  # fmt: skip
+            if passed:
+                report_search["best_passed_over"] = passed[0]
             report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
@@ -188,17 +191,18 @@ def _deliver(
     source: dict,
     skipped: Counter,
     ends: float,
+    passed: list[dict] | None = None,
 ) -> tuple[Delivered, list[dict], list]:
     """Verify designs from the best until one passes, counting in `skipped` why each better one
-    was passed over; then the alternatives, if asked for. Past the time budget's end (`ends`,
-    a `time.monotonic()` value) the export no longer tries the slow bracket construction. With
-    constraints, only designs that meet them all, measured exactly in the user's units, are
-    exported; the measurements of the one delivered come back too. After QUICK_AFTER export
-    refusals each next design is first checked quickly (straight links at the usual width,
-    what most designs that build need) and passed over untried if that refuses it: a ranking
-    full of designs that cannot be built flat, as long budgets' rounds leave, costs a few
-    seconds, not the attempts, and still delivers. After half the attempts, only designs the
-    later rounds did not grow are tried (`_ranked`)."""
+    was passed over (and listing those tried in `passed`, `output.deliver`); then the
+    alternatives, if asked for. Past the time budget's end (`ends`, a `time.monotonic()` value)
+    the export no longer tries the slow bracket construction. With constraints, only designs
+    that meet them all, measured exactly in the user's units, are exported; the measurements of
+    the one delivered come back too. After QUICK_AFTER export refusals each next design is first
+    checked quickly (straight links at the usual width, what most designs that build need) and
+    passed over untried if that refuses it: a ranking full of designs that cannot be built flat,
+    as long budgets' rounds leave, costs a few seconds, not the attempts, and still delivers.
+    After half the attempts, only designs the later rounds did not grow are tried (`_ranked`)."""
     order = np.argsort(candidates.chamfer, kind="stable")
     batch = candidates.batch
     c = o.constraints
@@ -238,7 +242,7 @@ def _deliver(
             else:
                 origin = SOURCES[candidates.source[row]]
                 found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
-                                o.timed, skipped, time.monotonic() < ends)  # fmt: skip
+                                o.timed, skipped, time.monotonic() < ends, passed)  # fmt: skip
                 if found:
                     break
                 failed[key] = failed.get(key, 0) + 1
