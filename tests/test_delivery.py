@@ -1,7 +1,6 @@
 """Delivery passes over designs the export refuses, quickly once a few have been refused
 (linkd.design.pipeline._deliver)."""
 
-from collections import Counter
 
 import numpy as np
 import pytest
@@ -11,7 +10,7 @@ from test_rounds import STUBBORN
 from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design import pipeline
-from linkd.design.output import SKIP_REASONS
+from linkd.design.output import skip_counts
 from linkd.design.pipeline import DesignOptions, NoDesign, _ranked
 from linkd.design.propose import Candidates
 from linkd.design.select import end_effector_path, measure
@@ -22,17 +21,16 @@ ROCKER = classic.crank_rocker()
 
 
 def _delivered(mechanisms, folder, passed=None, **options):
-    """The design delivered from `mechanisms`, ranked in that order, and what was skipped
-    (those tried and passed over listed in `passed`)."""
+    """The design delivered from `mechanisms`, ranked in that order, and how many were passed
+    over, by reason (each listed in `passed`)."""
     batch = LinkageBatch.from_mechanisms(mechanisms)
     candidates = Candidates(batch, np.arange(len(mechanisms)) * 0.1)
-    skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))
+    passed = [] if passed is None else passed
     points = end_effector_path(ROCKER)[0]
     found, _, _ = pipeline._deliver(candidates, Similarity(), points,
                                     DesignOptions(formats=frozenset({"mjcf"}), **options),
-                                    Stages(False), folder, {}, skipped, np.inf,
-                                    passed)  # fmt: skip
-    return found.mechanism, skipped
+                                    Stages(False), folder, {}, passed, np.inf)  # fmt: skip
+    return found.mechanism, skip_counts(passed)
 
 
 def _same(mech, other) -> bool:

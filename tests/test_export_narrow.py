@@ -2,7 +2,6 @@
 `linkd design` counts when it passes a better design over."""
 
 import re
-from collections import Counter
 
 import numpy as np
 import pytest
@@ -69,11 +68,11 @@ def test_a_width_the_user_gives_is_kept(tmp_path):
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
         export_mechanism(SNARLED, tmp_path, {"mjcf"})
-    skipped = Counter()
+    passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
-    assert deliver(SNARLED, target, tmp_path, {"mjcf"}, {}, skipped=skipped) is None
-    assert skipped == {"unbuildable": 1}
+    assert deliver(SNARLED, target, tmp_path, {"mjcf"}, {}, passed=passed) is None
+    assert [p["reason"] for p in passed] == ["unbuildable"]
     assert not list(tmp_path.iterdir())
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,21 +48,18 @@ def deliver(
     formats: set[str],
     source: dict,
     timed: bool = False,
-    skipped: Counter | None = None,
-    brackets: bool = True,
     passed: list[dict] | None = None,
+    brackets: bool = True,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
-    fails any step, counted in `skipped` by the step ("invalid", "unbuildable": the export
-    refused it, "failed_verification") and listed in `passed` with its curve error once
-    measured (what the user gives up). `target` is the user's curve, in the mechanism's frame
-    (`timed`: its rows equally spaced in time; `brackets`: whether the export may split
-    plates and hold ground pins on brackets)."""
-    skipped = Counter() if skipped is None else skipped
+    fails any step, listed in `passed` with the step ("reason": "invalid", "unbuildable": the
+    export refused it, or "failed_verification") and, once measured, its curve error (what
+    the user gives up). `target` is the user's curve, in the mechanism's frame (`timed`: its
+    rows equally spaced in time; `brackets`: whether the export may split plates and hold
+    ground pins on brackets)."""
     passed = [] if passed is None else passed
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
-        skipped["invalid"] += 1
         passed.append({"reason": "invalid"})
         return None
     measures = measure(mech, target, timed)
@@ -76,10 +72,14 @@ def deliver(
         why = "unbuildable"
     if why:
         _empty(folder)
-        skipped[why] += 1
         passed.append({"reason": why, "chamfer": measures.chamfer})
         return None
     return Delivered(mech, measures, export, report, folder)
+
+
+def skip_counts(passed: list[dict]) -> dict[str, int]:
+    """How many designs were passed over for each of SKIP_REASONS."""
+    return {why: sum(p["reason"] == why for p in passed) for why in SKIP_REASONS}
 
 
 def finish(design: Delivered, target: np.ndarray, formats: set[str], report: dict) -> None:

@@ -27,7 +27,6 @@ as the budget does not cut refinement short (report.json says whether it did).
 from __future__ import annotations
 
 import time
-from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +43,7 @@ from linkd.scale import check_curve_size
 
 from .constrained import screen
 from .drawn import read_target
-from .output import SKIP_REASONS, Delivered, deliver, finish, summary
+from .output import Delivered, deliver, finish, skip_counts, summary
 from .propose import SOURCES, Candidates, Proposer
 from .prune import pruned
 from .refine import RefineSettings, single_thread
@@ -139,17 +138,16 @@ def design(
         report_search["constraints"] = o.constraints.to_dict()
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
+    passed: list[dict] = []  # the better designs passed over, best first
     try:
         with single_thread(), staged_output(out, force) as stage:
             inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
             deadline = start + o.time_budget - DELIVERY_RESERVE
             candidates = search(goal, inner, o, proposer, stages, deadline, report_search)
-            skipped = Counter(dict.fromkeys(SKIP_REASONS, 0))  # better designs passed over
-            report_search["skipped"] = skipped
             ends = start + o.time_budget
-            passed: list[dict] = []  # the designs passed over, best first
             found, alternatives, measured = _deliver(candidates, frame, points, o, stages, stage,
-                                                     source, skipped, ends, passed)  # fmt: skip
+                                                     source, passed, ends)  # fmt: skip
+            report_search["skipped"] = skip_counts(passed)
             if passed:
                 report_search["best_passed_over"] = passed[0]
             report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
@@ -175,6 +173,7 @@ def design(
                 note(f"{out}/")
             found.folder = Path(out)
     except NoDesign as reason:
+        report_search["skipped"] = skip_counts(passed)
         stages.say(f"[red]no design[/]: {reason}")
         return Outcome(None, None, {"search": report_search, "reason": str(reason)}, [])
     report["timings"] = _timings(stages, start)
@@ -189,12 +188,11 @@ def _deliver(
     stages: Stages,
     stage: Path,
     source: dict,
-    skipped: Counter,
+    passed: list[dict],
     ends: float,
-    passed: list[dict] | None = None,
 ) -> tuple[Delivered, list[dict], list]:
-    """Verify designs from the best until one passes, counting in `skipped` why each better one
-    was passed over (and listing those tried in `passed`, `output.deliver`); then the
+    """Verify designs from the best until one passes, listing in `passed` each better one passed
+    over and why (`output.deliver`; those a quick check refused, unmeasured); then the
     alternatives, if asked for. Past the time budget's end (`ends`, a `time.monotonic()` value)
     the export no longer tries the slow bracket construction. With constraints, only designs
     that meet them all, measured exactly in the user's units, are exported; the measurements of
@@ -227,12 +225,12 @@ def _deliver(
                 continue
             candidate = pruned(batch.subset([int(row)]))
             mech, measured = _checked(candidate, frame, o, _range(candidates, row))
-            if mech is not None and skipped["unbuildable"] >= QUICK_AFTER:
+            if mech is not None and skip_counts(passed)["unbuildable"] >= QUICK_AFTER:
                 if quick == QUICK_CHECKS:
                     break
                 quick += 1
                 if not buildable(mech, quick=True):  # not a try: the check costs little
-                    skipped["unbuildable"] += 1
+                    passed.append({"reason": "unbuildable"})
                     refused += 1
                     failed[key] = failed.get(key, 0) + 1
                     continue
@@ -242,7 +240,7 @@ def _deliver(
             else:
                 origin = SOURCES[candidates.source[row]]
                 found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
-                                o.timed, skipped, time.monotonic() < ends, passed)  # fmt: skip
+                                o.timed, passed, time.monotonic() < ends)  # fmt: skip
                 if found:
                     break
                 failed[key] = failed.get(key, 0) + 1
