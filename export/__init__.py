@@ -122,18 +122,25 @@ def _layered(
     layerings = [assign_layers] if quick else [assign_layers, bent_layers]
     if options.brackets and not quick:
         layerings.append(braced_layers)
+    swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
+
+    def paths(size: Sizes) -> np.ndarray:
+        if size.link_width not in swept:
+            swept[size.link_width] = sweep(mech, size.link_width)
+        return swept[size.link_width]
+
     first = None
     for layering in layerings:
         for size in tries:
             try:
-                return size, layering(assembly, sweep(mech, size.link_width), size)
+                return size, layering(assembly, paths(size), size)
             except ValueError as exc:
                 first = first or exc
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
     culprits = ""
     if not quick:  # which pins, for the designer to move: found at the narrowest width tried
         narrowest = tries[-1]
-        conflicts = find_conflicts(assembly, sweep(mech, narrowest.link_width), narrowest)
+        conflicts = find_conflicts(assembly, paths(narrowest), narrowest)
         pins = blocking_pins(assembly, conflicts, narrowest)
         if pins:
             culprits = f"; with straight parts, {_listed(pins)} alone cannot all be kept clear"
