@@ -14,6 +14,7 @@ with a `scene.xml` around it (`mjcf`).
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -47,6 +48,8 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "set_timestep"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
+CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
+                 braced_layers: "split plates and brackets"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
@@ -67,9 +70,11 @@ def export_mechanism(
     out_dir: Path,
     formats: set[str] = FORMATS,
     options: ExportOptions | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> ExportResult:
     """Write mechanism.json (with `layers` and `parts`), and per `formats` mechanism.xml with
     scene.xml ("mjcf") and meshes/*.stl ("stl") into the existing folder `out_dir`.
+    `progress` is told what is being tried (the search for layers can take a minute).
 
     Raises ValueError for an invalid mechanism, an unknown format or impossible sizes.
     """
@@ -85,7 +90,9 @@ def export_mechanism(
     if status != Status.VALID:
         raise ValueError(f"invalid mechanism: {status.reason}")
     assembly = assemble(mech)
-    sizes, layout = _layered(mech, assembly, options or ExportOptions())
+    say = progress or (lambda text: None)
+    sizes, layout = _layered(mech, assembly, options or ExportOptions(), progress=say)
+    say(f"writing {layout.count} layers of parts")
     files: list[Path] = []
     meshes, wholes, volumes = {}, {}, {}
     if "stl" in formats:
@@ -104,7 +111,11 @@ def export_mechanism(
 
 
 def _layered(
-    mech: Mechanism, assembly: Assembly, options: ExportOptions, quick: bool = False
+    mech: Mechanism,
+    assembly: Assembly,
+    options: ExportOptions,
+    quick: bool = False,
+    progress: Callable[[str], None] = lambda text: None,
 ) -> tuple[Sizes, Layout]:
     """Sizes and layers. Where the default link width leaves no flat layering (a part passes
     over a pin whose plates would lie above and below it, in every order), narrower links may
@@ -113,7 +124,7 @@ def _layered(
     and then plates are cut into arms and ground pins are held by brackets or as
     stubs from both plates (`braced`, unless `options.brackets` is off). Widths the user gave
     are kept (the other constructions are still tried; ValueError when nothing works). quick:
-    straight links at the first width only."""
+    straight links at the first width only. `progress` is told each construction and width."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None and not quick:
@@ -132,6 +143,9 @@ def _layered(
     first = None
     for layering in layerings:
         for size in tries:
+            fraction = size.link_width / sizes.link_width
+            width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
+            progress(f"layering {CONSTRUCTIONS[layering]} at {width}")
             try:
                 return size, layering(assembly, paths(size), size)
             except ValueError as exc:
@@ -139,6 +153,7 @@ def _layered(
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
     culprits = ""
     if not quick:  # which pins, for the designer to move: found at the narrowest width tried
+        progress("none layers: finding the pins that keep it from layering")
         narrowest = tries[-1]
         conflicts = find_conflicts(assembly, paths(narrowest), narrowest)
         pins = blocking_pins(assembly, conflicts, narrowest)

@@ -13,6 +13,7 @@ is written and verified once, as before.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 from linkd.export import TIMESTEP, ExportOptions, ExportResult, export_mechanism, set_timestep
@@ -24,16 +25,24 @@ FINEST = TIMESTEP / 16  # s: the finest step tried (its dynamics check runs 16 t
 
 
 def export_verified(
-    mech: Mechanism, out_dir: Path, formats: set[str], options: ExportOptions | None = None
+    mech: Mechanism,
+    out_dir: Path,
+    formats: set[str],
+    options: ExportOptions | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> tuple[ExportResult, Report]:
     """Export `mech` into the folder `out_dir` (`formats` must include "mjcf") and verify it,
     refining the time step while only the dynamics check fails, and only on its loop-closure
-    or path tolerance. The report is not written. ValueError when the export refuses `mech`."""
-    export = export_mechanism(mech, out_dir, formats, options)
+    or path tolerance. The report is not written. ValueError when the export refuses `mech`.
+    `progress` is told what is being done."""
+    say = progress or (lambda text: None)
+    export = export_mechanism(mech, out_dir, formats, options, say)
+    say("verifying in MuJoCo")
     report = verify_output(out_dir, write=False)
     step = TIMESTEP
     while (excess := _excess(report)) > 1 and step > FINEST:
         step = max(FINEST, step / 2 ** math.ceil(math.log2(excess) / 2))
+        say(f"verifying again at a time step of {step * 1e3:g} ms")
         set_timestep(out_dir, step)
         report = verify_output(out_dir, write=False)
     return export, report

@@ -27,6 +27,29 @@ def test_export_writes_the_output_folder(tmp_path, capsys):
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no staging left
 
 
+def test_export_shows_its_stages_on_a_terminal(tmp_path, monkeypatch):
+    import io
+
+    from rich.console import Console
+
+    from linkd.commands import export
+    from linkd.design.stages import Stages
+
+    screen = io.StringIO()
+
+    def on_a_terminal() -> Stages:
+        stages = Stages(show=True)
+        stages.console = Console(file=screen, force_terminal=True, width=100)
+        return stages
+
+    monkeypatch.setattr(export, "Stages", on_a_terminal)
+    out = tmp_path / "out"
+    assert main(["export", str(EXAMPLES / "crank_rocker.json"), "--out", str(out)]) == 0
+    layers = json.loads((out / "mechanism.json").read_text())["layers"]
+    text = screen.getvalue()
+    assert f"export   {layers} layers, verified in MuJoCo" in text and "write" in text
+
+
 def test_export_replaces_its_own_output_and_refuses_other_folders(tmp_path):
     mech = str(EXAMPLES / "crank_rocker.json")
     out = tmp_path / "out"

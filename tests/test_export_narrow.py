@@ -49,7 +49,11 @@ def test_refused_at_the_default_width_is_built_with_narrower_links_and_verified(
     default = resolve_sizes(TANGLED, assembly.parts, None)
     with pytest.raises(ValueError, match="flat layers"):
         assign_layers(assembly, sweep(TANGLED, default.link_width), default)
-    result = export_mechanism(TANGLED, tmp_path)
+    told = []
+    result = export_mechanism(TANGLED, tmp_path, progress=told.append)
+    assert told == ["layering straight parts at the usual width",
+                    "layering straight parts at 0.5 of the usual width",
+                    f"writing {result.layers} layers of parts"]  # fmt: skip
     assert result.sizes["link_width"] == pytest.approx(default.link_width / 2)
     assert result.sizes["hole_diameter"] == pytest.approx(default.hole_diameter / 2)
     report = verify_output(tmp_path, write=False)
@@ -66,8 +70,13 @@ def test_a_width_the_user_gives_is_kept(tmp_path):
 
 
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
+    told = []
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
-        export_mechanism(SNARLED, tmp_path, {"mjcf"})
+        export_mechanism(SNARLED, tmp_path, {"mjcf"}, progress=told.append)
+    constructions = ("straight parts", "bent links", "split plates and brackets")
+    widths = ("the usual width", "0.5 of the usual width", "0.25 of the usual width")
+    assert told == [f"layering {c} at {w}" for c in constructions for w in widths] + [
+        "none layers: finding the pins that keep it from layering"]  # fmt: skip
     passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]

@@ -183,7 +183,7 @@ def export(args: argparse.Namespace) -> int:
     from linkd.verified import export_verified
 
     graphs = generate(args.count, args.seed).graphs
-    outcome, failed, layers, seconds = Counter(), Counter(), [], []
+    outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
     for graph in graphs:
         mech = from_graph(graph, Similarity(scale=args.size))
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
@@ -193,6 +193,7 @@ def export(args: argparse.Namespace) -> int:
                 result, report = export_verified(mech, Path(out), {"mjcf", "stl"})
             except ValueError:
                 outcome["refused (no flat layering)"] += 1
+                refusals.append(time.perf_counter() - start)
                 continue
             seconds.append(time.perf_counter() - start)
         layers.append(result.layers)
@@ -232,6 +233,9 @@ def export(args: argparse.Namespace) -> int:
               f"mean {np.mean(layers):.1f}, median {np.median(layers):g}")  # fmt: skip
         print(f"  export + verify seconds      median {np.median(seconds):.2f}, "
               f"max {max(seconds):.2f}")  # fmt: skip
+    if refusals:  # what a user waits to be told no
+        print(f"  seconds to refuse            median {np.median(refusals):.2f}, "
+              f"max {max(refusals):.2f}")  # fmt: skip
     return 0
 
 

@@ -10,6 +10,7 @@ import json
 import time
 from pathlib import Path
 
+from linkd.design.stages import Stages
 from linkd.errors import InputError
 from linkd.mechanism import Mechanism
 from linkd.outdir import fresh_name, staged_output, write_atomic
@@ -77,17 +78,24 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError(f"{args.mechanism}: {exc}") from None
     out = Path(args.out) if args.out else fresh_name(Path(f"{Path(args.mechanism).stem}-export"))
+    stages = Stages()  # on a terminal: what is being tried, as the search can take a minute
     try:
         with staged_output(out, args.force) as stage:
             begun = time.perf_counter()
-            if "mjcf" in formats:  # proved in MuJoCo, which also settles the model's time step
-                result, verification = export_verified(mech, stage, formats, options)
-            else:
-                result, verification = export_mechanism(mech, stage, formats, options), None
+            with stages.stage("export", "finding layers for the parts") as note:
+                if "mjcf" in formats:  # proved in MuJoCo, which also settles its time step
+                    result, verification = export_verified(mech, stage, formats, options,
+                                                           stages.progress)  # fmt: skip
+                else:
+                    result = export_mechanism(mech, stage, formats, options, stages.progress)
+                    verification = None
+                checked = verification and ("verified" if verification.passed else "failed")
+                note(f"{result.layers} layers" + (f", {checked} in MuJoCo" if checked else ""))
             timings = {"export_s": result.seconds}
             if verification:
                 timings["verify_s"] = time.perf_counter() - begun - result.seconds
-            timings |= _extras(mech, stage)
+            with stages.stage("write", "writing the animation and the plot"):
+                timings |= _extras(mech, stage)
             timings["total_s"] = time.perf_counter() - start
             report = _report(result, verification, timings)
             write_atomic(stage / "report.json", json.dumps(report, indent=2))
