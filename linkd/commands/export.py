@@ -89,8 +89,9 @@ def run(args: argparse.Namespace) -> int:
                 else:
                     result = export_mechanism(mech, stage, formats, options, stages.progress)
                     verification = None
-                checked = verification and ("verified" if verification.passed else "failed")
-                note(f"{result.layers} layers" + (f", {checked} in MuJoCo" if checked else ""))
+                proof = "" if verification is None else (
+                    ", verified in MuJoCo" if verification.passed else ", failed in MuJoCo")
+                note(f"{result.layers} layers{proof}")
             timings = {"export_s": result.seconds}
             if verification:
                 timings["verify_s"] = time.perf_counter() - begun - result.seconds

@@ -1,4 +1,5 @@
-"""The progress display of a design run: one line per stage with what it found and its time.
+"""The progress display of a run (`linkd design`, `linkd export`): one line per stage with what
+it found and its time.
 
 On a terminal each running stage shows a spinner (with its progress, where the stage reports
 it) and each finished one a line with its timing; anywhere else the display stays silent, and
