@@ -184,7 +184,9 @@ def test_distributed_training_on_two_cpu_processes(data, tmp_path):
     assert torch.equal(weights(load_checkpoint(tmp_path / "r" / "linkd.pt")[0]), gathered[0])
 
 
-def test_warm_start_adds_cross_attention_without_changing_the_model(data, tmp_path):
+@pytest.mark.parametrize("growth", [{"cross_attention": True}, {"layers": 3}])
+def test_warm_start_grows_the_model_without_changing_it(data, tmp_path, growth):
+    """Cross-attention (the `cpu-guided` preset) and new blocks (`gpu-deep`) start at zero."""
     from linkd.model import save_checkpoint
     from linkd.train import warm_start
 
@@ -194,7 +196,7 @@ def test_warm_start_adds_cross_attention_without_changing_the_model(data, tmp_pa
         for p in plain.parameters():
             p.add_(0.1 * torch.randn_like(p))  # adaLN away from zero, as after training
     save_checkpoint(tmp_path / "plain.pt", plain.eval())
-    grown = LinkD(replace(PRESETS["tiny"].model, cross_attention=True)).eval()
+    grown = LinkD(replace(PRESETS["tiny"].model, **growth)).eval()
     warm_start(grown, tmp_path / "plain.pt")
     graphs, curves = data.graphs[:8], conditioning(data.curves[:8])
     losses = []
@@ -245,3 +247,9 @@ def test_the_command_line_sets_the_position_weight_of_the_loss(tmp_path):
         sum(v.item() for k, v in parts.items() if k != "position") + 4 * parts["position"].item(),
         rel=1e-5,
     )
+
+
+def test_the_command_line_offers_every_preset():
+    from linkd.commands.train import PRESETS as NAMES
+
+    assert set(NAMES) == set(PRESETS)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "gpu-sub", "cuda", "tiny")
+PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "gpu-sub", "gpu-deep", "cuda", "tiny")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
