@@ -26,6 +26,7 @@ from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
+from .forked import forked_layers
 from .layers import Layout, assign_layers, find_conflicts, plate_points, plates, post_spans, sweep
 from .mjcf import (
     PROBE_DENSITY,
@@ -49,7 +50,8 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
 
 FORMATS = frozenset({"mjcf", "stl"})
 CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
-                 braced_layers: "split plates and brackets"}  # fmt: skip
+                 braced_layers: "split plates and brackets",
+                 forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
@@ -132,7 +134,7 @@ def _layered(
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
     layerings = [assign_layers] if quick else [assign_layers, bent_layers]
     if options.brackets and not quick:
-        layerings.append(braced_layers)
+        layerings += [braced_layers, forked_layers]
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:
@@ -159,7 +161,7 @@ def _layered(
         pins = blocking_pins(assembly, conflicts, narrowest)
         if pins:
             culprits = f"; with straight parts, {_listed(pins)} alone cannot all be kept clear"
-    raise ValueError(f"{first} (straight, bent and split links{widths} tried{culprits})")
+    raise ValueError(f"{first} (straight, bent, split and forked parts{widths} tried{culprits})")
 
 
 def _listed(names: list[str]) -> str:
@@ -258,6 +260,7 @@ def describe_parts(
             entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
         out.append(entry)
     fixed = {j: p for p, arms in layout.arms.items() for j in keyed(a.joints for a in arms)}
+    fixed |= {assembly.pins[k].joint: fork.part for k, fork in layout.forks.items()}
     for rod in pin_rods(assembly, layout):
         lo, hi = rod.span
         entry = {

@@ -68,9 +68,9 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     MAX_LINK_CUTS of cuts along the plates' own links."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
-    union, extended, roles, posts = _candidates(assembly, paths, sizes, ground)
+    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
     conflicts = find_conflicts(union, extended, sizes)
-    bracket = _best_brackets(conflicts, roles)
+    bracket = best_brackets(conflicts, roles)
 
     def layered(split: dict[int, tuple], held: tuple[int, ...], relaxed: bool = False):
         keep = [q for q, role in enumerate(roles)
@@ -180,7 +180,7 @@ def _splits(trees: dict[int, list[tuple]]) -> Iterator[dict[int, tuple]]:
                     yield {plates[k]: way for k, way in zip(picked, ways)}
 
 
-def _candidates(
+def candidates(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, ground: tuple[int, ...]
 ) -> tuple[Assembly, np.ndarray, list[tuple], np.ndarray]:
     """Every candidate part as the layer search sees it: the real parts, an arm between each
@@ -211,8 +211,8 @@ def _candidates(
         members += [q for q, part in enumerate(parts) if q and pin.joint in part.joints]
         pins.append(Pin(pin.name, pin.joint, members[0], tuple(members)))
     pinned = {pin.joint for pin in assembly.pins}
-    for q, part in enumerate(assembly.parts):  # a shaft where no pin is: the split part's own
-        for j in (j for j in part.joints if j not in pinned) if part.kind == "plate" else ():
+    for q, part in enumerate(assembly.parts):  # a shaft where no pin is: a split part's own
+        for j in (j for j in part.joints if j not in pinned) if q else ():
             members = tuple(k for k, other in enumerate(parts) if j in other.joints)
             pins.append(Pin(f"shaft_{j}", j, q, members))
     brackets = [q for q, role in enumerate(roles) if role[0] == "bracket"]
@@ -221,7 +221,7 @@ def _candidates(
     return Assembly(parts, [], pins, []), np.concatenate([paths, still]), roles, posts
 
 
-def _best_brackets(conflicts: Conflicts, roles: list[tuple]) -> dict[int, int]:
+def best_brackets(conflicts: Conflicts, roles: list[tuple]) -> dict[int, int]:
     """The bracket candidate of each ground pin whose arm the fewest pin paths, then real
     parts, come near."""
     real = np.array([role[0] == "part" for role in roles])

@@ -73,6 +73,16 @@ class Shaft:
 
 
 @dataclass(frozen=True)
+class Fork:
+    """A pin cut into coaxial rods where `part` is forked (`forked`): each rod is fixed in the
+    part's arms it passes, and other parts (the ground: 0) turn on it."""
+
+    part: int
+    rods: tuple[tuple[tuple[int, ...], tuple[int, int]], ...]  # (the parts turning on it, its
+    # layer span), bottom up
+
+
+@dataclass(frozen=True)
 class Bracket:
     """A ground plate on a layer inside the stack, holding the pin of a ground joint, with an
     arm out to a post that stands in the base plate (or hangs from the cover)."""
@@ -96,6 +106,7 @@ class Layout:
     brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
     shafts: tuple[Shaft, ...] = ()  # split parts' own pins at joints no other part shares
     cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `rods.pin_rods`
+    forks: dict[int, Fork] = field(default_factory=dict)  # pins cut into rods, by pin index
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,8 @@ class ExportOptions:
     layer_gap: float | None = None  # axial play between neighbouring layers
     clearance: float | None = None  # least in-plane gap between plates of one layer
     density: float = 1200.0  # kg/m^3 (PLA-like)
-    # Where no flat layering builds, split plates and hold ground pins on brackets (`braced`).
+    # Where no flat layering builds, split plates and hold ground pins on brackets (`braced`),
+    # or fork a part (`forked`).
     # Its search takes seconds to refuse a mechanism, so a design run past its time budget goes
     # without.
     brackets: bool = True

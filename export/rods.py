@@ -1,11 +1,13 @@
-"""Pins as made: one rod per pin, or two for a ground pin whose parts are held from both the
-base and the cover (stubs, `layers.stack_layers`)."""
+"""Pins as made: one rod per pin, two for a ground pin whose parts are held from both the
+base and the cover (stubs, `layers.stack_layers`), one per part turning on it where a part
+forks (`forked`)."""
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
+from string import ascii_lowercase
 
 from .layers import Layout
 from .parts import Assembly
@@ -26,9 +28,17 @@ class Rod:
 def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
     """Every pin's rod. A ground pin whose parts are held from both plates (`cover_stubs`: pin
     index to the span of its stub from the cover) is two: `pin_spans` standing in the base, its
-    stub (`<name>_top`) hanging from the cover, each through the parts within its span."""
+    stub (`<name>_top`) hanging from the cover, each through the parts within its span. A pin
+    where a part forks (`forks`) is coaxial rods fixed in the forked part, `<name>a`,
+    `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20)."""
     rods = []
     for k, pin in enumerate(assembly.pins):
+        if k in layout.forks:
+            fork = layout.forks[k]
+            for letter, (parts, span) in zip(ascii_lowercase, fork.rods):
+                name = f"{pin.name}{letter}"
+                rods.append(Rod(name, pin.joint, fork.part, (fork.part, *parts), span))
+            continue
         if k not in layout.cover_stubs:
             rods.append(Rod(pin.name, pin.joint, pin.hub, pin.members, layout.pin_spans[k]))
             continue

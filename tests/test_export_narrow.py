@@ -33,13 +33,14 @@ KNOTTED = Mechanism(
     (0, 1), 7,
 )  # fmt: skip
 
-# Generated (seed 2026, no. 63): a crank plate with four pins; no flat layering at any width,
-# straight, bent or split on a bracket.
+# Generated (`generate(100, 11)`, no. 11): a crank plate 0-1-2-3 whose links sweep over the
+# ground pivots 0, 4 and 6; no flat layering at any width, straight, bent, split on a bracket or
+# forked. (Seed 2026's no. 63, refused here before, is built since parts fork.)
 SNARLED = Mechanism(
-    [(87.552, 99.887), (88.600, 52.471), (68.072, 76.128), (22.447, -18.934), (98.645, 5.661),
-     (7.390, -1.423), (32.129, -97.137), (5.600, -60.209), (62.346, 60.864)],
-    [1, 0, 1, 0, 0, 1, 0, 0, 0],
-    [(0, 1), (0, 4), (1, 3), (1, 6), (1, 7), (1, 8), (2, 3), (3, 4), (4, 8), (5, 6), (6, 7)],
+    [(25.226, -71.276), (15.634, -38.903), (61.697, 50.642), (-86.454, 70.829), (-63.687, 56.116),
+     (72.725, -58.503), (28.949, 19.657), (-63.281, -99.612), (-77.796, 81.274)],
+    [1, 0, 0, 0, 1, 0, 1, 0, 0],
+    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 5), (2, 3), (3, 7), (4, 5), (5, 8), (6, 7), (7, 8)],
     (0, 1), 8,
 )  # fmt: skip
 
@@ -73,7 +74,7 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     told = []
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
         export_mechanism(SNARLED, tmp_path, {"mjcf"}, progress=told.append)
-    constructions = ("straight parts", "bent links", "split plates and brackets")
+    constructions = ("straight parts", "bent links", "split plates and brackets", "forked parts")
     widths = ("the usual width", "0.5 of the usual width", "0.25 of the usual width")
     assert told == [f"layering {c} at {w}" for c in constructions for w in widths] + [
         "none layers: finding the pins that keep it from layering"]  # fmt: skip

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import time
 from pathlib import Path
 
@@ -202,7 +203,11 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which with narrower links"] += 1
         if report.passed and any("bends" in part for part in result.parts):
             outcome["  of which with bent links"] += 1
-        if report.passed and any("arm_of" in part for part in result.parts):
+        pins = [part for part in result.parts if part["kind"] == "pin"]
+        forked = any(re.fullmatch(r"pin_\d+[a-z]", pin["name"]) for pin in pins)  # cut into rods
+        if report.passed and forked:
+            outcome["  of which forked"] += 1
+        if report.passed and not forked and any("arm_of" in part for part in result.parts):
             outcome["  of which with split plates"] += 1
         arms: dict[str, list[set]] = {}
         for part in result.parts:
@@ -212,16 +217,15 @@ def export(args: argparse.Namespace) -> int:
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
         if report.passed and any(part["kind"] == "post" for part in result.parts):
             outcome["  of which on a bracket"] += 1
-        pins = [part["joints"][0] for part in result.parts if part["kind"] == "pin"]
-        if report.passed and len(set(pins)) < len(pins):  # a pin and a stub at one joint
-            outcome["  of which on ground stubs"] += 1
+        if report.passed and any(pin["name"].endswith("_top") for pin in pins):
+            outcome["  of which on ground stubs"] += 1  # a pin and a stub at one joint
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
-                 "  of which on a bracket",
+                 "  of which on a bracket", "  of which forked",
                  "  of which on ground stubs", "  of which with a finer step",
                  "failed verification", "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:

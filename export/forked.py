@@ -1,0 +1,234 @@
+"""Forked parts: a part made as one arm per part it carries, so that each can turn on its own
+side of the stack.
+
+Where a joint carries several parts, their pin spans every layer between them, and in some
+mechanisms no order keeps that span clear: two couplers hung on the crank tip each sweep over
+the other's pin, or the parts a crank carries wall in its pivot, which a bracket must hold from
+inside the stack. A fork cuts that pin, as a bicycle's crank does: the part is made as one arm
+from a shaft joint to a joint it shares, for each part it carries there, all fixed on the
+shaft; at that joint each arm has a rod of its own, fixed in the arm, on which its one part
+turns. The rods at a joint are coaxial but need not overlap in z, so other parts may pass
+between them, and a bracket may hold the shaft between the arms.
+
+One part is forked, at one of its joints, with at most one ground pin on a bracket (the fewest
+brackets first, then the parts with the fewest joints). The clearances are those `braced`
+sweeps for its candidates: an arm is the part itself (a link) or the arm of a plate between the
+same joints, and its copies share its clearances. A fork is not searched when it does not layer
+even with no ground pins at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .braced import best_brackets, candidates
+from .layers import (
+    Arm,
+    Bracket,
+    Conflicts,
+    Fork,
+    Layout,
+    NoFlatLayers,
+    Shaft,
+    find_conflicts,
+    stack_layers,
+)
+from .options import Sizes
+from .parts import Assembly, Pin
+
+MAX_FORKS = 120  # layer searches per width before the construction gives up
+
+
+@dataclass
+class _Problem:
+    """A fork's layer search. `keep`: the union candidate each of its parts is (the forked
+    part's copies repeat one); `copies`: (joint, the part carried there or None, index) of
+    each copy; `real`: a real pin's pin in the search; `rods`: a real pin cut into rods, as
+    (the part carried, its pin in the search); `shaft`: the search's pin the copies are fixed
+    on."""
+
+    keep: list[int] = field(default_factory=list)
+    pins: list[Pin] = field(default_factory=list)
+    blocked: list[list[int]] = field(default_factory=list)
+    whole: list[int] = field(default_factory=list)
+    copies: list[tuple[int, int | None, int]] = field(default_factory=list)
+    real: dict[int, int] = field(default_factory=dict)
+    rods: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
+    shaft: int | None = None
+
+
+def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """Layers with one part forked (and at most one ground pin on a bracket). ValueError when
+    none layers within MAX_FORKS layer searches."""
+    ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
+    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
+    conflicts = find_conflicts(union, extended, sizes)
+    bracket = best_brackets(conflicts, roles)
+    moving = sorted(range(1, len(assembly.parts)), key=lambda q: len(assembly.parts[q].joints))
+    forks = [(q, s) for q in moving for s in assembly.parts[q].joints]
+    searches, refusal = 0, None
+
+    def search(fork: tuple[int, int], held: int | None, relaxed: bool = False):
+        nonlocal searches, refusal
+        if searches >= MAX_FORKS:
+            raise refusal or ValueError("no forked part layers within the search")
+        searches += 1
+        problem = _problem(assembly, union, conflicts, roles, fork, held, bracket, relaxed)
+        try:
+            return problem, _layered(problem, union, conflicts, sizes)
+        except NoFlatLayers as exc:
+            refusal = refusal or exc
+            if relaxed and exc.proved:
+                forks.remove(fork)
+            return None
+
+    for fork in list(forks):  # first the bound: no ground pins at all
+        search(fork, None, relaxed=True)
+    for held in [None, *ground]:
+        for fork in forks:
+            found = search(fork, held)
+            if found is not None:
+                return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
+    raise refusal or ValueError("no forked part layers")
+
+
+def _problem(
+    assembly: Assembly,
+    union: Assembly,
+    conflicts: Conflicts,
+    roles: list[tuple],
+    fork: tuple[int, int],
+    held: int | None,
+    bracket: dict[int, int],
+    relaxed: bool = False,
+) -> _Problem:
+    """The search for part `fork[0]` forked at joint `fork[1]`, ground pin `held` (if any) on
+    its bracket; relaxed: no ground pins at all, a bound on every way to hold them."""
+    part, shaft = fork
+    index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
+    arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
+    forked = assembly.parts[part]
+    problem = _Problem(keep=[u for q, u in index.items() if q != part])
+    if held is not None:
+        problem.keep.append(bracket[held])
+    geometry: dict[int, list[int]] = {}  # union candidate -> the copies made of it
+    for j in (j for j in forked.joints if j != shaft):
+        u = index[part] if forked.kind == "link" else arm[(part, tuple(sorted((shaft, j))))]
+        carries = [q for q, other in enumerate(assembly.parts) if j in other.joints and q != part]
+        for carried in carries or [None]:  # a joint of its own (an end effector): one arm
+            geometry.setdefault(u, []).append(len(problem.keep))
+            problem.copies.append((j, carried, len(problem.keep)))
+            problem.keep.append(u)
+    copies = [c for _, _, c in problem.copies]
+    where = {u: k for k, u in enumerate(problem.keep) if k not in copies}
+    grounds = {pin.joint for pin in assembly.pins if 0 in pin.members}
+
+    def mapped(k: int, exempt: tuple[int, ...] = ()) -> list[int]:
+        near = conflicts.blocked[k]
+        copied = [c for u in near for c in geometry.get(u, ()) if c not in exempt]
+        return [where[u] for u in near if u in where] + copied
+
+    for k, pin in enumerate(union.pins):
+        j, real = pin.joint, k < len(assembly.pins)
+        if pin.name.startswith("post"):
+            if held is not None and bracket[held] in pin.members:
+                _add(problem, pin, [0, where[bracket[held]]], mapped(k))
+            continue
+        if relaxed and j in grounds:
+            continue  # the bound: held in any way at all
+        members = [where[u] for u in pin.members if u and u in where and roles[u][0] == "part"]
+        if 0 in pin.members:
+            members.insert(0, where[bracket[held]] if j == held else 0)
+        if j == shaft and (real or pin.name.startswith("shaft_")):
+            problem.shaft = _add(problem, pin, members + copies, mapped(k))
+            problem.whole.append(problem.shaft)
+            problem.real[k] = problem.shaft
+        elif j in forked.joints and real:
+            here = tuple(c for joint, _, c in problem.copies if joint == j)
+            for joint, carried, c in problem.copies:
+                if joint == j and carried is not None:
+                    own = members[0] if carried == 0 else where[index[carried]]
+                    others = [m for m in members if m not in (own, 0)]
+                    rod = _add(problem, pin, [c, own], mapped(k, here) + others)
+                    problem.rods.setdefault(k, []).append((carried, rod))
+        elif (real or pin.name.startswith("shaft_")) and len(members) >= 2:
+            problem.real[k] = _add(problem, pin, members, mapped(k))
+    return problem
+
+
+def _add(problem: _Problem, pin: Pin, members: list[int], near: list[int]) -> int:
+    """Append a pin of the search; its index."""
+    problem.pins.append(Pin(pin.name, pin.joint, members[0], tuple(members)))
+    problem.blocked.append(near)
+    return len(problem.pins) - 1
+
+
+def _layered(problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout:
+    """stack_layers on the fork's candidates: a part's copies share its clearances and may
+    not share a layer with each other."""
+    sub = np.ix_(problem.keep, problem.keep)
+    near, distance = conflicts.parts[sub].copy(), conflicts.distance[sub].copy()
+    copies = [c for _, _, c in problem.copies]
+    near[np.ix_(copies, copies)] = True
+    distance[np.ix_(copies, copies)] = 0.0
+    near[copies, copies] = False
+    chosen = Assembly([union.parts[u] for u in problem.keep], [], problem.pins, [])
+    return stack_layers(chosen, Conflicts(near, problem.blocked, distance), sizes, stubs=True,
+                        whole=problem.whole)  # fmt: skip
+
+
+def _real(
+    assembly: Assembly,
+    layout: Layout,
+    problem: _Problem,
+    roles: list[tuple],
+    posts: np.ndarray,
+    fork: tuple[int, int],
+    first: int,
+) -> Layout:
+    """The layout of the real parts: the forked part's arms (its layer their lowest), the rods
+    its pins are cut into, its shaft where no pin was, the bracket and where its post goes
+    (joint `first + k` for post k)."""
+    part, shaft = fork
+    layers = np.zeros(len(assembly.parts), int)
+    for k, u in enumerate(problem.keep):
+        if roles[u][0] == "part" and roles[u][1]:
+            layers[roles[u][1]] = layout.layers[k]
+    arms = tuple(Arm(tuple(sorted((shaft, j))), int(layout.layers[c]))
+                 for j, _, c in problem.copies)  # fmt: skip
+    layers[part] = min(a.layer for a in arms)
+    spans = [(0, 0)] * len(assembly.pins)
+    stubs = {}
+    for k, s in problem.real.items():
+        if k < len(assembly.pins):
+            spans[k] = layout.pin_spans[s]
+            if s in layout.cover_stubs:
+                stubs[k] = layout.cover_stubs[s]
+    forks = {}
+    for k, rods in problem.rods.items():
+        forks[k] = Fork(part, _merged([((carried,), layout.pin_spans[s]) for carried, s in rods]))
+        spans[k] = (forks[k].rods[0][1][0], max(hi for _, (_, hi) in forks[k].rods))
+    shafts = ()
+    if problem.shaft is not None and problem.pins[problem.shaft].name.startswith("shaft_"):
+        shafts = (Shaft(part, shaft, layout.pin_spans[problem.shaft]),)
+    brackets = tuple(
+        Bracket(roles[u][1], tuple(map(float, posts[roles[u][2]])), int(layout.layers[k]),
+                first + roles[u][2] in layout.top_joints)
+        for k, u in enumerate(problem.keep) if roles[u][0] == "bracket")  # fmt: skip
+    top = tuple(j for j in layout.top_joints if j < first)
+    return Layout(layers, spans, top, layout.count, layout.min_gap, layout.minimal,
+                  arms={part: arms}, brackets=brackets, shafts=shafts, cover_stubs=stubs,
+                  forks=forks)  # fmt: skip
+
+
+def _merged(rods: list[tuple[tuple[int, ...], tuple[int, int]]]) -> tuple:
+    """Coaxial rods that overlap in z made one rod (through the parts of both), bottom up."""
+    out: list = []
+    for parts, (lo, hi) in sorted(rods, key=lambda rod: rod[1]):
+        if out and lo <= out[-1][1][1]:
+            (before, (low, high)) = out.pop()
+            parts, lo, hi = before + parts, low, max(high, hi)
+        out.append((parts, (lo, hi)))
+    return tuple(out)
