@@ -68,8 +68,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     MAX_LINK_CUTS of cuts along the plates' own links."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
-    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
-    conflicts = find_conflicts(union, extended, sizes)
+    union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     bracket = best_brackets(conflicts, roles)
 
     def layered(split: dict[int, tuple], held: tuple[int, ...], relaxed: bool = False):
@@ -219,6 +218,26 @@ def candidates(
     pins += [Pin(f"post{k}", first + k, 0, (0, q)) for k, q in enumerate(brackets)]
     still = np.repeat(posts[:, None], paths.shape[1], 1)
     return Assembly(parts, [], pins, []), np.concatenate([paths, still]), roles, posts
+
+
+SWEPT_KEPT = 4  # candidate sweeps kept: one per width `linkd.export` tries, and to spare
+_swept: list[tuple] = []  # (assembly, paths, sizes, what they gave), the latest last
+
+
+def swept_candidates(
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes
+) -> tuple[Assembly, list[tuple], np.ndarray, Conflicts]:
+    """The candidates (`candidates`: their assembly, roles and posts) and their conflicts,
+    kept for the same assembly, paths and sizes (the very objects): sweeping them takes
+    seconds, and `forked` searches the same candidates at each width after this module."""
+    for kept in _swept:
+        if kept[0] is assembly and kept[1] is paths and kept[2] == sizes:
+            return kept[3]
+    ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
+    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
+    found = (union, roles, posts, find_conflicts(union, extended, sizes))
+    _swept[:] = [*_swept[1 - SWEPT_KEPT :], (assembly, paths, sizes, found)]
+    return found
 
 
 def best_brackets(conflicts: Conflicts, roles: list[tuple]) -> dict[int, int]:

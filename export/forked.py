@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .braced import best_brackets, candidates
+from .braced import best_brackets, swept_candidates
 from .layers import (
     Arm,
     Bracket,
@@ -32,13 +32,12 @@ from .layers import (
     Layout,
     NoFlatLayers,
     Shaft,
-    find_conflicts,
     stack_layers,
 )
 from .options import Sizes
 from .parts import Assembly, Pin
 
-MAX_FORKS = 120  # layer searches per width before the construction gives up
+MAX_FORKS = 60  # layer searches per width before the construction gives up
 
 
 @dataclass
@@ -63,8 +62,7 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     """Layers with one part forked (and at most one ground pin on a bracket). ValueError when
     none layers within MAX_FORKS layer searches."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
-    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
-    conflicts = find_conflicts(union, extended, sizes)
+    union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     bracket = best_brackets(conflicts, roles)
     moving = sorted(range(1, len(assembly.parts)), key=lambda q: len(assembly.parts[q].joints))
     forks = [(q, s) for q in moving for s in assembly.parts[q].joints]

@@ -1,6 +1,6 @@
 """Pins as made: one rod per pin, two for a ground pin whose parts are held from both the
-base and the cover (stubs, `layers.stack_layers`), one per part turning on it where a part
-forks (`forked`)."""
+base and the cover (stubs, `layers.stack_layers`), coaxial rods apart in z where a part forks
+(`forked`)."""
 
 from __future__ import annotations
 
