@@ -7,14 +7,14 @@ the other's pin, or the parts a crank carries wall in its pivot, which a bracket
 inside the stack. A fork cuts that pin, as a bicycle's crank does: the part is made as one arm
 from a shaft joint to a joint it shares, for each part it carries there, all fixed on the
 shaft; at that joint each arm has a rod of its own, fixed in the arm, on which its one part
-turns. The rods at a joint are coaxial but need not overlap in z, so other parts may pass
-between them, and a bracket may hold the shaft between the arms.
+turns. The rods at a joint are coaxial but need not meet in z (where they would, they are one
+rod), so other parts may pass between them, and a bracket may hold the shaft between the arms.
 
 One part is forked, at one of its joints, with at most one ground pin on a bracket (the fewest
 brackets first, then the parts with the fewest joints). The clearances are those `braced`
-sweeps for its candidates: an arm is the part itself (a link) or the arm of a plate between the
-same joints, and its copies share its clearances. A fork is not searched when it does not layer
-even with no ground pins at all.
+swept for its candidates at the same width: an arm is the part itself (a link) or the arm of a
+plate between the same joints, and its copies share its clearances. A fork is not searched
+when it does not layer even with no ground pins at all.
 """
 
 from __future__ import annotations

@@ -130,3 +130,12 @@ def test_a_rod_lengthened_into_the_bracket_is_caught(bicycle, tmp_path):
     assert "collisions" in report.failed
     detail = next(c.detail for c in report.checks if c.name == "collisions")
     assert "pin_2b" in detail
+
+
+def test_coaxial_rods_that_would_meet_are_made_one():
+    """Rods at one joint sharing a layer would be one piece of metal: one rod through the parts
+    of both; rods apart stay apart, bottom up."""
+    apart = [((4,), (5, 6)), ((3,), (1, 3))]
+    assert forked._merged(apart) == (((3,), (1, 3)), ((4,), (5, 6)))
+    meeting = [((5,), (5, 7)), ((3,), (1, 3)), ((4,), (3, 5))]
+    assert forked._merged(meeting) == (((3, 4, 5), (1, 7)),)
