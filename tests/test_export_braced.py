@@ -6,6 +6,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 import trimesh
+from planted import collision_detail, editable_copy
 from test_export_narrow import KNOTTED
 
 from linkd.export import ExportOptions, buildable, export_mechanism
@@ -102,18 +103,10 @@ def test_a_plate_split_on_its_own_shaft_and_a_bracketed_pin_are_built_and_verifi
     assert report.passed, report.failed
 
 
-def _moved(out, name: str, z: float | None = None, xy: tuple | None = None) -> ET.ElementTree:
-    tree = ET.parse(out / "mechanism.xml")
-    geom = next(g for g in tree.iter("geom") if g.get("name") == name)
+def _moved(geom: ET.Element, z: float | None = None, xy: tuple | None = None) -> None:
     x, y, height = map(float, geom.get("pos").split())
     x, y = xy or (x, y)
     geom.set("pos", f"{x} {y} {height if z is None else z}")
-    return tree
-
-
-def _z(out, name: str) -> float:
-    tree = ET.parse(out / "mechanism.xml")
-    return float(next(g for g in tree.iter("geom") if g.get("name") == name).get("pos").split()[2])
 
 
 @pytest.mark.parametrize("plant", ["arm", "shaft", "bracket", "post"])
@@ -121,29 +114,26 @@ def test_a_planted_collision_in_a_split_plate_or_a_bracket_is_caught(stacked, tm
     """An arm laid on the layer of a link it shares a joint with, the shaft moved onto another
     joint, the bracket laid on its link's layer, or the post set down across that link:
     verification must name the part."""
-    out, _ = stacked
-    for path in out.iterdir():
-        (tmp_path / path.name).symlink_to(path)
-    (tmp_path / "mechanism.xml").unlink()
+    tree, geoms = editable_copy(stacked[0], tmp_path)
+
+    def z(name: str) -> float:
+        return float(geoms[name].get("pos").split()[2])
+
     if plant == "arm":  # the arm to joint 3 onto link_3_15's layer: their bosses overlap
         name = "plate_2_3_5_8_10_arm1"
-        tree = _moved(out, name, z=_z(out, "link_3_15"))
+        _moved(geoms[name], z=z("link_3_15"))
     elif plant == "shaft":  # the shaft, layers 1..16, stood at joint 5 through link_5_12
         name = "pin_8"
         x, y = (STACKED.positions[5] - STACKED.positions[8]) * 1e-3  # in the pin's body frame
-        tree = _moved(out, name, xy=(x, y))
+        _moved(geoms[name], xy=(x, y))
     elif plant == "bracket":
         name = "ground_bracket0"
-        tree = _moved(out, name, z=_z(out, "link_11_12"))
+        _moved(geoms[name], z=z("link_11_12"))
     else:  # the post, layers 0..5, at the middle of link_11_12 (layer 4)
         name = "ground_post0"
         x, y = STACKED.positions[[11, 12]].mean(0) * 1e-3
-        tree = _moved(out, name, xy=(x, y))
-    tree.write(tmp_path / "mechanism.xml")
-    report = verify_output(tmp_path, write=False)
-    assert "collisions" in report.failed
-    detail = next(c.detail for c in report.checks if c.name == "collisions")
-    assert name in detail
+        _moved(geoms[name], xy=(x, y))
+    assert name in collision_detail(tree, tmp_path)
 
 
 def test_without_brackets_the_same_mechanism_is_refused(tmp_path):

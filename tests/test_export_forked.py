@@ -2,17 +2,16 @@
 turning on a rod of its own, builds mechanisms that no flat, bent, split or bracketed layering
 does; verified in MuJoCo, and a planted collision of a rod is caught."""
 
-import xml.etree.ElementTree as ET
 from itertools import pairwise
 
 import pytest
 import trimesh
+from planted import collision_detail, editable_copy
 
 import linkd.export.forked as forked
 from linkd.export import export_mechanism
 from linkd.mechanism import Mechanism
 from linkd.verified import export_verified
-from linkd.verify import verify_output
 
 # Generated (seed 2026, no. 93 of 200). The crank plate 0-1-2 carries plate 2-4-7 and link
 # 2-6 at joint 2, and they sweep over the ground pivots 0, 3 and 5, so pivot 0 must be held from
@@ -112,12 +111,7 @@ def test_a_link_carrying_two_parts_at_one_joint_is_forked_without_a_bracket(monk
 def test_a_rod_lengthened_into_the_bracket_is_caught(bicycle, tmp_path):
     """The upper rod at joint 2 stood down onto the bracket's layer: the bracket's arm crosses
     the joint's circle, so verification must name the rod."""
-    out = bicycle[0]
-    for path in out.iterdir():
-        (tmp_path / path.name).symlink_to(path)
-    (tmp_path / "mechanism.xml").unlink()
-    tree = ET.parse(out / "mechanism.xml")
-    geoms = {g.get("name"): g for g in tree.iter("geom")}
+    tree, geoms = editable_copy(bicycle[0], tmp_path)
     rod, bracket = geoms["pin_2b"], geoms["ground_bracket0"]
     radius, half = map(float, rod.get("size").split())
     x, y, z = map(float, rod.get("pos").split())
@@ -125,10 +119,7 @@ def test_a_rod_lengthened_into_the_bracket_is_caught(bicycle, tmp_path):
     top = z + half
     rod.set("size", f"{radius} {(top - floor) / 2}")
     rod.set("pos", f"{x} {y} {(top + floor) / 2}")
-    tree.write(tmp_path / "mechanism.xml")
-    report = verify_output(tmp_path, write=False)
-    assert "collisions" in report.failed
-    detail = next(c.detail for c in report.checks if c.name == "collisions")
+    detail = collision_detail(tree, tmp_path)
     assert "pin_2b" in detail
 
 

@@ -2,10 +2,10 @@
 layer is built with a pin in the base and a stub from the cover, verified, and a stub moved
 onto a passing part's layer is caught."""
 
-import xml.etree.ElementTree as ET
 
 import pytest
 import trimesh
+from planted import collision_detail, editable_copy
 from test_export import SPLIT_GROUND
 
 from linkd.export import export_mechanism
@@ -42,16 +42,8 @@ def test_the_two_stubs_are_built_and_verified(split_ground):
 def test_a_stub_lowered_onto_a_passing_part_is_caught(split_ground, tmp_path):
     """The cover's stub at joint 0 moved down to the layer of link_1_3, which passes over the
     joint between the two stubs: verification must name the stub."""
-    out, _ = split_ground
-    for path in out.iterdir():
-        (tmp_path / path.name).symlink_to(path)
-    (tmp_path / "mechanism.xml").unlink()
-    tree = ET.parse(out / "mechanism.xml")
-    geoms = {g.get("name"): g for g in tree.iter("geom")}
+    tree, geoms = editable_copy(split_ground[0], tmp_path)
     stub, passing = geoms["pin_0_top"], geoms["link_1_3"]
     x, y, _ = stub.get("pos").split()
     stub.set("pos", f"{x} {y} {passing.get('pos').split()[2]}")
-    tree.write(tmp_path / "mechanism.xml")
-    report = verify_output(tmp_path, write=False)
-    assert "collisions" in report.failed
-    assert "pin_0_top" in next(c.detail for c in report.checks if c.name == "collisions")
+    assert "pin_0_top" in collision_detail(tree, tmp_path)

@@ -2,16 +2,15 @@
 of arms can layer is built as a crankshaft, verified in MuJoCo, and a planted collision of one
 of its arms is caught."""
 
-import xml.etree.ElementTree as ET
 
 import pytest
 import trimesh
+from planted import collision_detail, editable_copy
 
 import linkd.export.braced as braced
 from linkd.export import export_mechanism
 from linkd.mechanism import Mechanism
 from linkd.verified import export_verified
-from linkd.verify import verify_output
 
 # Generated (seed 2026, no. 147 of 200). Links 1-4, 2-7 and 6-8 hang on the crank plate
 # 0-1-2-6 and each sweeps over the others' joints in the plate's frame; ground pivot 0 is
@@ -62,16 +61,9 @@ def test_an_arm_lowered_onto_its_crankpin_link_is_caught(crankshaft, tmp_path):
     """The middle arm (layer 4) laid on the layer of link 1-4 (layer 3), which turns on the
     same crankpin: their bosses overlap, and verification must name the arm."""
     out, result, _ = crankshaft
-    for path in out.iterdir():
-        (tmp_path / path.name).symlink_to(path)
-    (tmp_path / "mechanism.xml").unlink()
-    tree = ET.parse(out / "mechanism.xml")
-    geoms = {g.get("name"): g for g in tree.iter("geom")}
+    tree, geoms = editable_copy(out, tmp_path)
     arm = next(p["name"] for p in result.parts if p.get("joints") == [1, 2] and "arm_of" in p)
     x, y, _ = geoms[arm].get("pos").split()
     z = geoms["link_1_4"].get("pos").split()[2]
     geoms[arm].set("pos", f"{x} {y} {z}")
-    tree.write(tmp_path / "mechanism.xml")
-    report = verify_output(tmp_path, write=False)
-    assert "collisions" in report.failed
-    assert arm in next(c.detail for c in report.checks if c.name == "collisions")
+    assert arm in collision_detail(tree, tmp_path)
