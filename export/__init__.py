@@ -6,7 +6,8 @@
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
 `routing`; where bent ones cannot either, plates are cut into arms and ground pins
-are held by brackets or as two stubs from base and cover, `braced`), plates become STL meshes
+are held by brackets or as two stubs from base and cover, `braced`, and failing that a part
+forks, `forked`), plates become STL meshes
 (`meshes`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
 with a `scene.xml` around it (`mjcf`).
 """

@@ -27,6 +27,7 @@ from linkd.mechanism import Mechanism
 
 from .options import Sizes
 from .parts import Assembly, joint_paths
+from .planar import convex_hull, cross, point_segment, segment_distance
 from .stacking import (
     SEARCH_BUDGET,
     PinState,
@@ -163,48 +164,6 @@ class Conflicts:
     distance: np.ndarray  # (P, P) least distance between the parts' joint hulls over the sweep
 
 
-def convex_hull(points: np.ndarray) -> list[int]:
-    """Indices of the counter-clockwise convex hull of 2D points (collinear points dropped)."""
-    order = sorted(range(len(points)), key=lambda k: (points[k][0], points[k][1]))
-    points = np.asarray(points)[:, 0] + 1j * np.asarray(points)[:, 1]
-
-    def half(indices: list[int]) -> list[int]:
-        chain: list[int] = []
-        for k in indices:
-            while len(chain) >= 2 and _cross(points[chain[-2]], points[chain[-1]], points[k]) <= 0:
-                chain.pop()
-            chain.append(k)
-        return chain
-
-    lower, upper = half(order), half(order[::-1])
-    hull = lower[:-1] + upper[:-1]
-    return hull or order[:1]
-
-
-def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """z of (a - o) x (b - o) for points as complex numbers, broadcast."""
-    return ((a - o).conj() * (b - o)).imag
-
-
-def _point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from p to segment a-b, points as complex numbers, broadcast."""
-    ab, ap = b - a, p - a
-    t = np.clip((ap * ab.conj()).real / np.maximum(ab.real**2 + ab.imag**2, 1e-300), 0.0, 1.0)
-    return np.abs(ap - t * ab)
-
-
-def segment_distance(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
-    """Distance between segments a1-a2 and b1-b2 (complex points, broadcast; 0 if they cross)."""
-    d = np.minimum(
-        np.minimum(_point_segment(a1, b1, b2), _point_segment(a2, b1, b2)),
-        np.minimum(_point_segment(b1, a1, a2), _point_segment(b2, a1, a2)),
-    )
-    crossing = (_cross(a1, a2, b1) * _cross(a1, a2, b2) < 0) & (
-        _cross(b1, b2, a1) * _cross(b1, b2, a2) < 0
-    )
-    return np.where(crossing, 0.0, d)
-
-
 def hull_edges(
     assembly: Assembly, positions: np.ndarray, chains: dict[int, list[int]] | None = None
 ) -> list[tuple[int, int, int]]:
@@ -259,7 +218,7 @@ def find_conflicts(
     for k in range(len(edges)):  # one row of the symmetric table at a time, over all angles
         edge_gap[k, k:] = segment_distance(start[k], end[k], start[k:], end[k:]).min(-1)
         edge_gap[k:, k] = edge_gap[k, k:]
-    joint_gap = np.stack([_point_segment(points[n], start, end).min(-1) for n in range(n_joints)])
+    joint_gap = np.stack([point_segment(points[n], start, end).min(-1) for n in range(n_joints)])
     distance = np.full((n_parts, n_parts), np.inf)
     np.minimum.at(distance, (owner[:, None], owner[None, :]), edge_gap)
     to_part = np.full((n_joints, n_parts), np.inf)
@@ -267,7 +226,7 @@ def find_conflicts(
     for q in range(n_parts):
         mine = owner == q
         if mine.sum() >= 3 and q not in chains:  # a polygon: a joint inside it is at distance 0
-            left = _cross(start[mine][None], end[mine][None], points[:, None]) >= 0  # (N, e, T)
+            left = cross(start[mine][None], end[mine][None], points[:, None]) >= 0  # (N, e, T)
             to_part[left.all(1).any(-1), q] = 0.0
     for p, part in enumerate(assembly.parts):
         inside = to_part[chains.get(p, list(part.joints))].min(0)  # a vertex of p inside q

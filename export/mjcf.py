@@ -32,9 +32,10 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import Layout, Plate, convex_hull, plate_points, plates, post_spans
+from .layers import Layout, Plate, plate_points, plates, post_spans
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
+from .planar import convex_hull
 from .rods import pin_rods
 
 if TYPE_CHECKING:

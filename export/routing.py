@@ -18,9 +18,10 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .layers import Layout, find_conflicts, segment_distance, stack_layers
+from .layers import Layout, find_conflicts, stack_layers
 from .options import Sizes
 from .parts import Assembly, part_rotations
+from .planar import segment_distance
 
 GRID_CELLS = 240  # cells along the longer side of a routing grid
 MAX_WAYPOINTS = 6  # bends of a route; a longer one is not worth building

@@ -10,17 +10,16 @@ from linkd import classic
 from linkd.export import ExportOptions, export_mechanism, hinge_angles
 from linkd.export.layers import (
     assign_layers,
-    convex_hull,
     find_conflicts,
     hull_edges,
     plates,
-    segment_distance,
     stack_layers,
     sweep,
 )
 from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import CRANK, assemble, rigid_parts
+from linkd.export.planar import convex_hull, segment_distance
 from linkd.export.rods import pin_rods
 from linkd.geometry import Similarity, rotation
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
