@@ -179,7 +179,7 @@ def _splits(trees: dict[int, list[tuple]]) -> Iterator[dict[int, tuple]]:
                     yield {plates[k]: way for k, way in zip(picked, ways)}
 
 
-def candidates(
+def _candidates(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, ground: tuple[int, ...]
 ) -> tuple[Assembly, np.ndarray, list[tuple], np.ndarray]:
     """Every candidate part as the layer search sees it: the real parts, an arm between each
@@ -227,14 +227,14 @@ _swept: list[tuple] = []  # (assembly, paths, sizes, what they gave), the latest
 def swept_candidates(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes
 ) -> tuple[Assembly, list[tuple], np.ndarray, Conflicts]:
-    """The candidates (`candidates`: their assembly, roles and posts) and their conflicts,
+    """The candidates (`_candidates`: their assembly, roles and posts) and their conflicts,
     kept for the same assembly, paths and sizes (the very objects): sweeping them takes
     seconds, and `forked` searches the same candidates at each width after this module."""
     for kept in _swept:
         if kept[0] is assembly and kept[1] is paths and kept[2] == sizes:
             return kept[3]
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
-    union, extended, roles, posts = candidates(assembly, paths, sizes, ground)
+    union, extended, roles, posts = _candidates(assembly, paths, sizes, ground)
     found = (union, roles, posts, find_conflicts(union, extended, sizes))
     _swept[:] = [*_swept[1 - SWEPT_KEPT :], (assembly, paths, sizes, found)]
     return found
