@@ -57,6 +57,11 @@ class _Problem:
     rods: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
     shaft: int | None = None
 
+    @property
+    def arms(self) -> list[int]:
+        """The copies' indices among the search's parts."""
+        return [c for _, _, c in self.copies]
+
 
 def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """Layers with one part forked (and at most one ground pin on a bracket). ValueError when
@@ -119,7 +124,7 @@ def _problem(
             geometry.setdefault(u, []).append(len(problem.keep))
             problem.copies.append((j, carried, len(problem.keep)))
             problem.keep.append(u)
-    copies = [c for _, _, c in problem.copies]
+    copies = problem.arms
     where = {u: k for k, u in enumerate(problem.keep) if k not in copies}
     grounds = {pin.joint for pin in assembly.pins if 0 in pin.members}
 
@@ -130,6 +135,7 @@ def _problem(
 
     for k, pin in enumerate(union.pins):
         j, real = pin.joint, k < len(assembly.pins)
+        kept = real or pin.name.startswith("shaft_")  # a real pin, or a plate's own shaft
         if pin.name.startswith("post"):
             if held is not None and bracket[held] in pin.members:
                 _add(problem, pin, [0, where[bracket[held]]], mapped(k))
@@ -139,7 +145,7 @@ def _problem(
         members = [where[u] for u in pin.members if u and u in where and roles[u][0] == "part"]
         if 0 in pin.members:
             members.insert(0, where[bracket[held]] if j == held else 0)
-        if j == shaft and (real or pin.name.startswith("shaft_")):
+        if j == shaft and kept:
             problem.shaft = _add(problem, pin, members + copies, mapped(k))
             problem.whole.append(problem.shaft)
             problem.real[k] = problem.shaft
@@ -151,7 +157,7 @@ def _problem(
                     others = [m for m in members if m not in (own, 0)]
                     rod = _add(problem, pin, [c, own], mapped(k, here) + others)
                     problem.rods.setdefault(k, []).append((carried, rod))
-        elif (real or pin.name.startswith("shaft_")) and len(members) >= 2:
+        elif kept and len(members) >= 2:
             problem.real[k] = _add(problem, pin, members, mapped(k))
     return problem
 
@@ -168,7 +174,7 @@ def _layered(problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Si
     not share a layer with each other."""
     sub = np.ix_(problem.keep, problem.keep)
     near, distance = conflicts.parts[sub].copy(), conflicts.distance[sub].copy()
-    copies = [c for _, _, c in problem.copies]
+    copies = problem.arms
     near[np.ix_(copies, copies)] = True
     distance[np.ix_(copies, copies)] = 0.0
     near[copies, copies] = False
