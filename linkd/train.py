@@ -100,6 +100,12 @@ PRESETS = {
         batch_size=1024, max_steps=10_000, lr=5e-4, min_lr=2e-5, warmup=200, eval_every=0,
         checkpoint_every=1000, device="cuda", sub_mechanisms=0.5, loader_workers=12,
     ),
+    # Continues a `gpu-sub` run (--init) in the curve's principal frame, as `cpu-canonical`.
+    "gpu-canonical": TrainConfig(
+        model=LinkDConfig(cross_attention=True, curve_dropout=0.1, guidance=1.5, canonical=True),
+        batch_size=1024, max_steps=6000, lr=5e-4, min_lr=2e-5, warmup=200, eval_every=0,
+        checkpoint_every=1000, device="cuda", sub_mechanisms=0.5, loader_workers=12,
+    ),
     "tiny": TrainConfig(
         model=LinkDConfig(dim=32, layers=1, heads=2, encoder_layers=1, head_widths=(32, 16),
                           head_cond=16),

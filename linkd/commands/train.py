@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "gpu-sub", "gpu-deep", "cuda", "tiny")
+PRESETS = ("cpu", "cpu-guided", "cpu-sub", "cpu-canonical", "gpu-sub", "gpu-canonical", "gpu-deep",
+           "cuda", "tiny")  # fmt: skip
 
 
 def register(sub: argparse._SubParsersAction) -> None:
