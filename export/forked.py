@@ -14,7 +14,8 @@ One part is forked, at one of its joints, with at most one ground pin on a brack
 brackets first, then the parts with the fewest joints). The clearances are those `braced`
 swept for its candidates at the same width: an arm is the part itself (a link) or the arm of a
 plate between the same joints, and its copies share its clearances. A fork is not searched
-when it does not layer even with no ground pins at all.
+when it does not layer even with no ground pins at all. No part but the crank is cut at the
+motor pivot: the crank must turn on a pin in the frame (or its own rod), where the motor is.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from .layers import (
     stack_layers,
 )
 from .options import Sizes
-from .parts import Assembly, Pin
+from .parts import CRANK, Assembly, Pin
 
 MAX_FORKS = 60  # layer searches per width before the construction gives up
 
@@ -71,6 +72,7 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     bracket = best_brackets(conflicts, roles)
     moving = sorted(range(1, len(assembly.parts)), key=lambda q: len(assembly.parts[q].joints))
     forks = [(q, s) for q in moving for s in assembly.parts[q].joints]
+    forks = [fork for fork in forks if _drivable(assembly, fork)]
     searches, refusal = 0, None
 
     def search(fork: tuple[int, int], held: int | None, relaxed: bool = False):
@@ -95,6 +97,15 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
             if found is not None:
                 return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
     raise refusal or ValueError("no forked part layers")
+
+
+def _drivable(assembly: Assembly, fork: tuple[int, int]) -> bool:
+    """Whether a motor in the frame still drives the crank: a fork of another part may not
+    cut the pin at the motor pivot, where the crank would turn on a rod of that part."""
+    crank = next(h for h in assembly.hinges if h.name == CRANK)
+    part, shaft = fork
+    cut = set(assembly.parts[part].joints) - {shaft}
+    return part == crank.child or crank.joint not in cut
 
 
 def _problem(

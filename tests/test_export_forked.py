@@ -10,6 +10,7 @@ from planted import collision_detail, editable_copy
 
 import linkd.export.forked as forked
 from linkd.export import export_mechanism
+from linkd.export.parts import assemble
 from linkd.mechanism import Mechanism
 from linkd.verified import export_verified
 
@@ -36,6 +37,18 @@ CLEVIS = Mechanism(
     [(0, 1), (0, 2), (1, 2), (1, 4), (1, 5), (1, 6), (2, 6), (3, 4), (4, 5), (4, 8), (6, 9),
      (7, 8), (8, 9)],
     (0, 1), 9,
+)  # fmt: skip
+
+# The best design `linkd design` found for LInK-Bench's drawn Q (seed 0), in mm. Link 0-5 turns
+# on the motor pivot beside the crank; forking it at 5 would hang the crank on a rod of its own.
+TWIN = Mechanism(
+    [(-4.732, -3.2465), (-3.1071, -4.127), (-4.422, -4.0992), (-4.0024, -2.1654),
+     (-3.9567, -3.7518), (-2.1545, -2.3155), (-3.581, -5.1577), (0.1042, -1.3971),
+     (-4.662, 1.8155), (-0.1069, -0.4883)],
+    [1, 0, 1, 0, 0, 0, 0, 1, 0, 0],
+    [(0, 1), (0, 5), (1, 3), (1, 4), (2, 3), (2, 6), (3, 4), (3, 5), (4, 6), (5, 8), (6, 9),
+     (7, 8), (8, 9)],
+    (0, 1), 9, units="mm",
 )  # fmt: skip
 
 
@@ -121,6 +134,18 @@ def test_a_rod_lengthened_into_the_bracket_is_caught(bicycle, tmp_path):
     rod.set("pos", f"{x} {y} {(top + floor) / 2}")
     detail = collision_detail(tree, tmp_path)
     assert "pin_2b" in detail
+
+
+def test_no_fork_hangs_the_crank_on_another_parts_rod():
+    """A fork cuts every pin of its part but the shaft's. Cut at the motor pivot for another
+    part, the crank would turn on a rod of that part, which a motor in the frame cannot drive;
+    the crank's own fork may cut it (its rod there still turns in the frame)."""
+    assembly = assemble(TWIN)
+    number = {part.name: q for q, part in enumerate(assembly.parts)}
+    link, crank = number["link_0_5"], number["link_0_1"]
+    assert not forked._drivable(assembly, (link, 5))
+    assert forked._drivable(assembly, (link, 0))  # its shaft at the pivot: the pin stays whole
+    assert forked._drivable(assembly, (crank, 1))
 
 
 def test_coaxial_rods_that_would_meet_are_made_one():
