@@ -5,9 +5,10 @@
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
-`routing`; where bent ones cannot either, plates are cut into arms and ground pins
-are held by brackets or as two stubs from base and cover, `braced`, and failing that a part
-forks, `forked`), plates become STL meshes
+`routing`; where bent ones cannot either, a link or two may turn on sheaves as eccentric
+straps, `strapped`, then plates are cut into arms and ground pins are held by brackets or as
+two stubs from base and cover, `braced`, and failing that a part forks, `forked`), plates
+become STL meshes
 (`meshes`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
 with a `scene.xml` around it (`mjcf`).
 """
@@ -44,6 +45,7 @@ from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .refusal import blocking_pins
 from .rods import keyed, pin_rods
 from .routing import bent_layers
+from .strapped import strapped_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "export_mechanism", "hinge_angles", "joint_paths", "qpos_at",
@@ -51,7 +53,7 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
 
 FORMATS = frozenset({"mjcf", "stl"})
 CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
-                 braced_layers: "split plates and brackets",
+                 strapped_layers: "eccentric straps", braced_layers: "split plates and brackets",
                  forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
@@ -124,8 +126,9 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    and then plates are cut into arms and ground pins are held by brackets or as
-    stubs from both plates (`braced`, unless `options.brackets` is off). Widths the user gave
+    then parts turn on sheaves as eccentric straps (`strapped`), and then plates are cut into
+    arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
+    `options.brackets` is off). Widths the user gave
     are kept (the other constructions are still tried; ValueError when nothing works). quick:
     straight links at the first width only. `progress` is told each construction and width."""
     sizes = resolve_sizes(mech, assembly.parts, options)
@@ -133,7 +136,7 @@ def _layered(
     if options.link_width is None and not quick:
         narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
         tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
-    layerings = [assign_layers] if quick else [assign_layers, bent_layers]
+    layerings = [assign_layers] if quick else [assign_layers, bent_layers, strapped_layers]
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers]
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
@@ -162,7 +165,8 @@ def _layered(
         pins = blocking_pins(assembly, conflicts, narrowest)
         if pins:
             culprits = f"; with straight parts, {_listed(pins)} alone cannot all be kept clear"
-    raise ValueError(f"{first} (straight, bent, split and forked parts{widths} tried{culprits})")
+    tried = f"straight, bent, strapped, split and forked parts{widths} tried{culprits}"
+    raise ValueError(f"{first} ({tried})")
 
 
 def _listed(names: list[str]) -> str:
@@ -176,7 +180,7 @@ def _write_meshes(
     """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
     convex pieces, which the model collides). Returns the model's mesh name -> relative path,
     plate name -> relative path of its whole STL, and the model's mesh name -> volume (m^3)."""
-    from .meshes import bent_mesh, plate_mesh, write_stl
+    from .meshes import bent_mesh, plate_mesh, sheave_mesh, strap_meshes, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
@@ -186,6 +190,18 @@ def _write_meshes(
     for plate in plates(assembly, layout):
         points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
+        if plate.sheave:  # the model's sheave is a cylinder, like a pin
+            write_stl(out_dir / whole[plate.name],
+                      sheave_mesh(points, plate.sheave * unit, *size[1:]), plate.name)  # fmt: skip
+            continue
+        if plate.bore:
+            solid, pieces = strap_meshes(points, plate.bore * unit, *size)
+            write_stl(out_dir / whole[plate.name], solid, plate.name)
+            for k, piece in enumerate(pieces):
+                name = f"{plate.name}_piece{k}"
+                model[name], volumes[name] = f"{MESHES}/{name}.stl", piece.volume
+                write_stl(out_dir / model[name], piece, name)
+            continue
         if not plate.bends:
             solid = plate_mesh(points, *size)
             write_stl(out_dir / whole[plate.name], solid, plate.name)
@@ -259,9 +275,18 @@ def describe_parts(
             entry["mesh"] = wholes[plate.name]
         if plate.bends and wholes:
             entry["pieces"] = [meshes[f"{plate.name}_bar{k}"] for k in range(len(plate.bends) + 1)]
+        if plate.bore:
+            entry["bore"] = 2 * plate.bore
+            if wholes:
+                entry["pieces"] = [path for name, path in meshes.items()
+                                   if name.startswith(f"{plate.name}_piece")]  # fmt: skip
+        if plate.sheave:
+            entry |= {"kind": "sheave", "diameter": 2 * plate.sheave,
+                      "fixed_in": assembly.parts[plate.part].name}  # fmt: skip
         out.append(entry)
     fixed = {j: p for p, arms in layout.arms.items() for j in keyed(a.joints for a in arms)}
     fixed |= {assembly.pins[k].joint: fork.part for k, fork in layout.forks.items()}
+    fixed |= {strap.joint: strap.sheave_of for strap in layout.straps}  # the sheave's pin
     for rod in pin_rods(assembly, layout):
         lo, hi = rod.span
         entry = {

@@ -95,6 +95,19 @@ class Bracket:
 
 
 @dataclass(frozen=True)
+class Strap:
+    """An eccentric strap (`strapped`): part `part` turns about `joint` on a sheave, a disc of
+    `radius` fixed in part `sheave_of` on the strap's layer, and the pins of `passing` (indices
+    of pins at the sheave's part's other joints) pass through the sheave, clear of the strap."""
+
+    part: int
+    joint: int
+    sheave_of: int
+    radius: float  # mechanism units
+    passing: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Layout:
     layers: np.ndarray  # (P,) layer of every part; the ground's (base plate) is 0
     pin_spans: list[tuple[int, int]]  # (lowest, highest) layer of each pin, plates included
@@ -108,6 +121,7 @@ class Layout:
     shafts: tuple[Shaft, ...] = ()  # split parts' own pins at joints no other part shares
     cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `rods.pin_rods`
     forks: dict[int, Fork] = field(default_factory=dict)  # pins cut into rods, by pin index
+    straps: tuple[Strap, ...] = ()  # parts that turn on sheaves (`strapped`)
 
 
 @dataclass(frozen=True)
@@ -120,11 +134,13 @@ class Plate:
     layer: int
     bends: tuple[tuple[float, float], ...] = ()  # waypoints of a bent link, between its joints
     posts: tuple[tuple[float, float], ...] = ()  # ground posts it holds (outline and holes)
+    bore: float = 0.0  # a strap: the radius of its bore round its first joint (`strapped`)
+    sheave: float = 0.0  # a sheave: a disc of this radius round its first joint
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
-    """Every plate of the layout: the ground's base (and cover) and brackets, then one per
-    moving part, or one per arm of a split part."""
+    """Every plate of the layout: the ground's base (and cover) and brackets, the sheaves of
+    straps, then one per moving part, or one per arm of a split part."""
     ground = assembly.parts[0]
     held = {b.joint for b in layout.brackets}
     base = tuple(j for j in ground.joints if j not in layout.top_joints and j not in held)
@@ -137,7 +153,18 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
         out.append(Plate(f"{ground.name}_cover", 0, cover, layout.count - 1, posts=high))
     for k, b in enumerate(layout.brackets):
         out.append(Plate(f"{ground.name}_bracket{k}", 0, (b.joint,), b.layer, posts=(b.post,)))
+    straps = {strap.part: strap for strap in layout.straps}
+    for strap in layout.straps:
+        name = f"{assembly.parts[strap.part].name}_sheave"
+        through = (assembly.pins[k].joint for k in strap.passing)
+        out.append(Plate(name, strap.sheave_of, (strap.joint, *through),
+                         int(layout.layers[strap.part]), sheave=strap.radius))  # fmt: skip
     for p, part in enumerate(assembly.parts[1:], start=1):
+        if p in straps:
+            joint = straps[p].joint
+            joints = (joint, *(j for j in part.joints if j != joint))
+            out.append(Plate(part.name, p, joints, int(layout.layers[p]), bore=straps[p].radius))
+            continue
         for k, arm in enumerate(layout.arms.get(p, ())):
             out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
         if p not in layout.arms:

@@ -54,6 +54,46 @@ def bent_mesh(chain: np.ndarray, width: float, hole_diameter: float, thickness: 
     return _solid(outline, chain[[0, -1]], hole_diameter, thickness)
 
 
+def strap_meshes(
+    points: np.ndarray, bore: float, width: float, hole_diameter: float, thickness: float
+) -> tuple[Solid, list[Solid]]:
+    """A strap (`strapped`): a ring of a half width round a bore of radius `bore` at points[0],
+    a bar from the ring out to each other point, and the hull of those (two or more), with
+    pin holes at those points. Returns the whole plate and its convex pieces for MuJoCo: the
+    ring as quadrilaterals whose inner sides touch the bore, the bars and the hull."""
+    import manifold3d
+
+    centre, others = points[0], points[1:]
+    outer = bore + width / 2
+    sides = int(np.clip(np.ceil(np.pi * np.sqrt(outer / (0.04 * width))), 16, 128))
+    angles = np.arange(sides + 1) * (2 * np.pi / sides)
+    rim = np.stack([np.cos(angles), np.sin(angles)], -1) / np.cos(np.pi / sides)
+    inner, rims = centre + bore * rim, centre + outer * rim
+    quads = [[inner[k], rims[k], rims[k + 1], inner[k + 1]] for k in range(sides)]  # anticlockwise
+    pieces = [manifold3d.CrossSection([np.array(quad).tolist()]) for quad in quads]
+    ends = centre + outer * (others - centre) / np.linalg.norm(others - centre, axis=1)[:, None]
+    pieces += [manifold3d.CrossSection.batch_hull(_discs(np.stack(pair), width / 2))
+               for pair in zip(ends, others)]  # fmt: skip
+    if len(others) >= 2:
+        pieces.append(manifold3d.CrossSection.batch_hull(_discs(others, width / 2)))
+    disc = manifold3d.CrossSection.circle(outer, 4 * SEGMENTS).translate(tuple(centre))
+    outline = manifold3d.CrossSection.batch_boolean([disc, *pieces[sides:]], manifold3d.OpType.Add)
+    outline = outline - manifold3d.CrossSection.circle(bore, 4 * SEGMENTS).translate(tuple(centre))
+    return _solid(outline, others, hole_diameter, thickness), [
+        _solid(piece, others, hole_diameter, thickness) for piece in pieces
+    ]
+
+
+def sheave_mesh(
+    points: np.ndarray, radius: float, hole_diameter: float, thickness: float
+) -> Solid:
+    """A sheave: a disc of `radius` round points[0], with a pin hole at every point."""
+    import manifold3d
+
+    disc = manifold3d.CrossSection.circle(radius, 4 * SEGMENTS).translate(tuple(points[0]))
+    return _solid(disc, points, hole_diameter, thickness)
+
+
 def _discs(points: np.ndarray, radius: float) -> list:
     import manifold3d
 

@@ -132,9 +132,22 @@ class _Builder:
         z = plate.layer * self.pitch
         colour = _fmt(*LAYER_COLOURS[plate.layer % len(LAYER_COLOURS)], 1)
         points = (plate_points(self.mech, plate) - self.origin[plate.part]) * self.unit
+        if plate.sheave:  # a journal like a pin: a cylinder on a body of its own, welded on
+            sheave = ET.SubElement(body, "body", name=plate.name, pos=_fmt(*points[0], 0))
+            ET.SubElement(sheave, "geom", name=plate.name, type="cylinder", rgba=colour,
+                          size=_fmt(plate.sheave * self.unit, self.thickness / 2),
+                          pos=_fmt(0, 0, z + self.thickness / 2))  # fmt: skip
+            return
         bends = (np.reshape(plate.bends, (-1, 2)) - self.origin[plate.part]) * self.unit
         chain = np.concatenate([points[:1], bends, points[1:]]) if plate.bends else points
-        pieces = [f"{plate.name}_bar{k}" for k in range(len(chain) - 1)] if plate.bends else []
+        if plate.bore:
+            pieces = sorted((n for n in meshes if n.startswith(f"{plate.name}_piece")),
+                            key=lambda n: int(n.rsplit("piece", 1)[1]))  # fmt: skip
+            if not pieces:
+                self.strap(plate, points, z, colour)
+                return
+        else:
+            pieces = [f"{plate.name}_bar{k}" for k in range(len(chain) - 1)] if plate.bends else []
         if plate.name in meshes or (pieces and pieces[0] in meshes):
             for name in pieces or [plate.name]:
                 geom = ET.SubElement(body, "geom", name=name, type="mesh", mesh=name,
@@ -150,13 +163,8 @@ class _Builder:
             sides = sides if len(hull) > 1 else []  # a lone joint (the ground at one pivot): a boss
         zc = z + self.thickness / 2
         for k, (a, b) in enumerate(sides):
-            length = np.linalg.norm(b - a)
-            if length == 0:
-                continue
-            (cx, cy), angle = (a + b) / 2, np.arctan2(*(b - a)[::-1])
-            ET.SubElement(body, "geom", name=f"{plate.name}_bar{k}", type="box",
-                          size=_fmt(length / 2, self.width / 2, self.thickness / 2),
-                          pos=_fmt(cx, cy, zc), euler=_fmt(0, 0, angle), rgba=colour)  # fmt: skip
+            if np.linalg.norm(b - a) > 0:
+                self.box(plate.part, f"{plate.name}_bar{k}", (a, b), self.width, zc, colour)
         posts = points[len(plate.joints) :]  # a disc round each post, named apart from the post
         discs = [*zip((f"boss{j}" for j in plate.joints), points),
                  *zip((f"post{k}_boss" for k in range(len(posts))), posts),
@@ -165,6 +173,39 @@ class _Builder:
             ET.SubElement(body, "geom", name=f"{plate.name}_{name}", type="cylinder",
                           size=_fmt(self.width / 2, self.thickness / 2), pos=_fmt(x, y, zc),
                           rgba=colour)  # fmt: skip
+
+    def strap(self, plate: Plate, points: np.ndarray, z: float, colour: str) -> None:
+        """A strap without meshes: its ring as boxes whose inner faces touch the bore, a bar
+        and a boss out to each other joint, and the sides of their hull (`meshes.strap_meshes`
+        for the shape)."""
+        centre, bore, zc = points[0], plate.bore * self.unit, z + self.thickness / 2
+        sides = 64
+        middle, half = bore + self.width / 4, (bore + self.width / 2) * np.tan(np.pi / sides)
+        for k in range(sides):
+            angle = (k + 0.5) * 2 * np.pi / sides
+            out = np.array([np.cos(angle), np.sin(angle)])
+            along = np.array([-out[1], out[0]]) * half
+            chord = (centre + middle * out - along, centre + middle * out + along)
+            self.box(plate.part, f"{plate.name}_ring{k}", chord, self.width / 2, zc, colour)
+        for k, point in enumerate(points[1:]):
+            out = (point - centre) / np.linalg.norm(point - centre)
+            bar = (centre + (bore + self.width / 2) * out, point)
+            self.box(plate.part, f"{plate.name}_bar{k}", bar, self.width, zc, colour)
+            ET.SubElement(self.bodies[plate.part], "geom", name=f"{plate.name}_boss{k}",
+                          type="cylinder", size=_fmt(self.width / 2, self.thickness / 2),
+                          pos=_fmt(*point, zc), rgba=colour)  # fmt: skip
+        hull = [points[1:][k] for k in convex_hull(points[1:])]
+        edges = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
+        for k, edge in enumerate(edges if len(hull) > 1 else []):
+            self.box(plate.part, f"{plate.name}_side{k}", edge, self.width, zc, colour)
+
+    def box(self, part: int, name: str, ends: tuple, width: float, zc: float, colour: str) -> None:
+        """A box geom of a plate's thickness and `width` from one point to another (part frame)."""
+        a, b = ends
+        (x, y), angle = (a + b) / 2, np.arctan2(*(b - a)[::-1])
+        ET.SubElement(self.bodies[part], "geom", name=name, type="box", rgba=colour,
+                      size=_fmt(np.linalg.norm(b - a) / 2, width / 2, self.thickness / 2),
+                      pos=_fmt(x, y, zc), euler=_fmt(0, 0, angle))  # fmt: skip
 
     def posts(self) -> None:
         """The brackets' posts: rods of the pin diameter on the ground, from the base plate up
@@ -230,6 +271,13 @@ def build_mjcf(
                 ET.SubElement(contact, "exclude", body1=rod.name, body2=assembly.parts[m].name)
     for shaft in layout.shafts:
         b.rod(shaft.part, shaft.name, shaft.joint, shaft.span)
+    for strap in layout.straps:  # the strap turns on its sheave, the pins pass through it
+        name = f"{assembly.parts[strap.part].name}_sheave"
+        ET.SubElement(contact, "exclude", body1=name, body2=assembly.parts[strap.part].name)
+        through = {strap.joint, *(assembly.pins[k].joint for k in strap.passing)}
+        for rod in pin_rods(assembly, layout):
+            if rod.joint in through:
+                ET.SubElement(contact, "exclude", body1=name, body2=rod.name)
     equality = ET.SubElement(root, "equality")
     for loop in assembly.loops:
         ET.SubElement(equality, "connect", name=loop.name, site1=b.site(loop.part, loop.joint),

@@ -7,7 +7,7 @@ import pytest
 import torch
 from hypothesis import settings
 
-from linkd.export import ExportOptions, buildable
+from linkd.export import ExportOptions, buildable, strapped
 from linkd.generator import GeneratorSettings, generate
 from linkd.graph import from_graph
 
@@ -25,6 +25,15 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def straps_off():
+    """No eccentric straps (`linkd.export.strapped`): the mechanisms that test the constructions
+    tried after them are built with straps when those are on."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(strapped, "MAX_STRAPS", 0)
+        yield
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,8 @@ TANGLED = Mechanism(
 
 # Generated (seed 2026, no. 80): a ternary crank whose two couplers each sweep over the other's
 # pin and over the pivot: no flat layering at any width linkd tries, straight or bent (it is
-# built with the crank split on a ground bracket, test_export_braced).
+# built with a link on a sheave, or with straps off the crank split on a ground bracket,
+# test_export_braced).
 KNOTTED = Mechanism(
     [(48.349, 73.281), (86.18, 96.902), (35.808, 91.922), (-62.988, 87.08), (-58.152, 9.109),
      (80.968, -67.956), (44.982, -77.361), (67.468, -0.151)],
@@ -33,15 +34,18 @@ KNOTTED = Mechanism(
     (0, 1), 7,
 )  # fmt: skip
 
-# Generated (`generate(100, 11)`, no. 11): a crank plate 0-1-2-3 whose links sweep over the
-# ground pivots 0, 4 and 6; no flat layering at any width, straight, bent, split on a bracket or
-# forked. (Seed 2026's no. 63, refused here before, is built since parts fork.)
+# Generated (`generate(40, 22, GeneratorSettings(min_nodes=7, max_nodes=10))`, no. 17, scaled
+# to 100 mm): links 1-3, 1-4 and 1-7 hang on the crank tip and sweep over the ground pivots 0
+# and 2 and over each other's pins; no flat layering at any width, straight, bent, strapped,
+# split on a bracket or forked. (`generate(100, 11)`'s no. 11, refused here before, is built
+# since parts turn on sheaves, and seed 2026's no. 63 since parts fork.)
 SNARLED = Mechanism(
-    [(25.226, -71.276), (15.634, -38.903), (61.697, 50.642), (-86.454, 70.829), (-63.687, 56.116),
-     (72.725, -58.503), (28.949, 19.657), (-63.281, -99.612), (-77.796, 81.274)],
-    [1, 0, 0, 0, 1, 0, 1, 0, 0],
-    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 5), (2, 3), (3, 7), (4, 5), (5, 8), (6, 7), (7, 8)],
-    (0, 1), 8,
+    [(38.1, 38.3), (66.1, 44.5), (-63.8, 43.2), (-17.7, -4.5), (66.1, -72.6), (-13.9, 35.8),
+     (-50.2, -92.8), (65.6, 93.1), (71.9, 26.2), (21.5, 59.6)],
+    [1, 0, 1, 0, 0, 1, 0, 0, 0, 0],
+    [(0, 1), (0, 4), (1, 3), (1, 4), (1, 7), (2, 3), (3, 7), (4, 6), (4, 8), (4, 9), (5, 6),
+     (7, 8), (8, 9)],
+    (0, 1), 9,
 )  # fmt: skip
 
 
@@ -74,7 +78,8 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     told = []
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
         export_mechanism(SNARLED, tmp_path, {"mjcf"}, progress=told.append)
-    constructions = ("straight parts", "bent links", "split plates and brackets", "forked parts")
+    constructions = ("straight parts", "bent links", "eccentric straps",
+                     "split plates and brackets", "forked parts")  # fmt: skip
     widths = ("the usual width", "0.5 of the usual width", "0.25 of the usual width")
     assert told == [f"layering {c} at {w}" for c in constructions for w in widths] + [
         "none layers: finding the pins that keep it from layering"]  # fmt: skip

@@ -168,7 +168,8 @@ def generator(args: argparse.Namespace) -> int:
 
 def export(args: argparse.Namespace) -> int:
     """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
-    tangled for flat layers, straight, bent, split, on brackets or on ground stubs, is refused
+    tangled for flat layers, straight, bent, strapped, split, on brackets, on ground stubs or
+    forked, is refused
     by the export and counted as such."""
     import tempfile
     from collections import Counter
@@ -207,6 +208,8 @@ def export(args: argparse.Namespace) -> int:
         forked = any(re.fullmatch(r"pin_\d+[a-z]", pin["name"]) for pin in pins)  # cut into rods
         if report.passed and forked:
             outcome["  of which forked"] += 1
+        if report.passed and any(part["kind"] == "sheave" for part in result.parts):
+            outcome["  of which strapped"] += 1
         if report.passed and not forked and any("arm_of" in part for part in result.parts):
             outcome["  of which with split plates"] += 1
         arms: dict[str, list[set]] = {}
@@ -225,7 +228,7 @@ def export(args: argparse.Namespace) -> int:
     print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
-                 "  of which on a bracket", "  of which forked",
+                 "  of which strapped", "  of which on a bracket", "  of which forked",
                  "  of which on ground stubs", "  of which with a finer step",
                  "failed verification", "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:

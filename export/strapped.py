@@ -1,0 +1,168 @@
+"""Eccentric straps: a part made as a strap round a sheave, so that pins may pass through it.
+
+In some mechanisms a pin's path, seen from a part that turns about a joint of another part,
+runs over that joint: a coupler hung on the crank tip sweeps over the crank's pivot, whose
+shaft must then stay off the coupler's layer, and no order of the stack allows it. A steam
+engine's valve gear meets the same problem with an eccentric: the crank is a disc (the
+sheave) wider than its throw, fixed on the shaft, and the rod ends in a ring (the strap) that
+turns round the disc. The shaft passes through the disc, inside the strap, and never meets it.
+
+Here a strap is part A at a joint J it shares with part B: A's plate has a bore round J, and
+a sheave, a disc fixed in B on A's layer, fills it. The sheave's radius reaches past every
+one of B's other joints whose pin comes near A (each keeps the hole radius and the clearance
+inside it), and A must keep its other joints clear of the bore. Those pins may then cross A's
+layer through the sheave; in exchange A's outline grows by the sheave's disc, which other
+parts and pins must keep clear of like any plate. No strap turns at the motor pivot: the
+motor's shaft is there. One strap is tried, then two, the ones freeing the most pin crossings
+first; none is searched unless freeing every candidate crossing with no disc added (looser than
+any choice) layers at all.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from itertools import combinations, islice
+
+import numpy as np
+
+from .layers import Conflicts, Layout, NoFlatLayers, Strap, find_conflicts, hull_edges, stack_layers
+from .options import Sizes
+from .parts import CRANK, Assembly
+from .planar import convex_hull, cross, point_segment
+
+MAX_STRAPS = 120  # layer searches per width before the construction gives up
+
+
+def strapped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """Layers with one or two parts made straps (NoFlatLayers when no choice tried layers)."""
+    conflicts = find_conflicts(assembly, paths, sizes)
+    options = _candidates(assembly, conflicts, paths[:, 0], sizes)
+    freed = {s: _inside(assembly, paths[:, 0], sizes, s) & _near(conflicts, s) for s in options}
+    loose = [[q for q in near if not any(k in freed[s] and q == s.part for s in options)]
+             for k, near in enumerate(conflicts.blocked)]  # fmt: skip
+    if not options or _layered(assembly, replace(conflicts, blocked=loose), sizes) is None:
+        raise NoFlatLayers("no strap frees the pins that keep the stack from layering", False)
+    ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
+    choices = [(s,) for s in ranked] + list(combinations(ranked, 2))
+    for chosen in islice(choices, MAX_STRAPS):
+        if len({s.part for s in chosen}) < len(chosen):
+            continue
+        layout = _layered(assembly, _with_straps(assembly, conflicts, paths, sizes, chosen), sizes)
+        if layout is not None:
+            straps = tuple(_passing(assembly, paths[:, 0], sizes, layout, s) for s in chosen)
+            return replace(layout, straps=straps)
+    raise NoFlatLayers("no strap tried lets the stack layer", False)
+
+
+def _candidates(
+    assembly: Assembly, conflicts: Conflicts, positions: np.ndarray, sizes: Sizes
+) -> list[Strap]:
+    """Every strap that frees a pin crossing: part A near pin P, at a joint J of a part B that
+    also has P's joint; the sheave reaches P with the hole radius and clearance to spare, and
+    A's other joints stay a width clear of the bore. None turns at the motor pivot: the motor's
+    shaft there is the crank's, and a sheave on it would be carried by nothing else."""
+    margin = sizes.hole_diameter / 2 + sizes.clearance
+    radius: dict[tuple[int, int, int], float] = {}
+    for k, pin in enumerate(assembly.pins):
+        for a in conflicts.blocked[k]:
+            for b, part in enumerate(assembly.parts):
+                if b == a or pin.joint not in part.joints:
+                    continue
+                for j in set(assembly.parts[a].joints) & set(part.joints) - {pin.joint}:
+                    r = float(np.linalg.norm(positions[pin.joint] - positions[j])) + margin
+                    radius[a, j, b] = max(radius.get((a, j, b), 0.0), r)
+    motor = next(h.joint for h in assembly.hinges if h.name == CRANK)
+    out = []
+    for (a, j, b), r in sorted(radius.items()):
+        others = positions[[k for k in assembly.parts[a].joints if k != j]]
+        clear = _distance_to_hull(positions[j], others) - sizes.link_width / 2 - margin
+        if j == motor or clear < r:
+            continue
+        out.append(Strap(a, j, b, r, ()))
+    return out
+
+
+def _distance_to_hull(point: np.ndarray, points: np.ndarray) -> float:
+    """From a point to the convex hull of `points` (0 inside it)."""
+    z, zs = point[0] + 1j * point[1], points[:, 0] + 1j * points[:, 1]
+    hull = zs[convex_hull(points)]
+    if len(hull) >= 3 and (cross(hull, np.roll(hull, -1), z) >= 0).all():
+        return 0.0
+    return float(point_segment(z, hull, np.roll(hull, -1)).min())
+
+
+def _inside(assembly: Assembly, positions: np.ndarray, sizes: Sizes, strap: Strap) -> set[int]:
+    """The pins the sheave holds inside, clear of the strap: at its part's other joints, within
+    its radius less the hole radius and clearance. Both are joints of one part, so the distance
+    never changes."""
+    margin = sizes.hole_diameter / 2 + sizes.clearance
+    centre, sheave = positions[strap.joint], assembly.parts[strap.sheave_of].joints
+    room = strap.radius * (1 + 1e-9) - margin
+    return {k for k, pin in enumerate(assembly.pins)
+            if pin.joint in sheave and pin.joint != strap.joint and strap.part not in pin.members
+            and np.linalg.norm(positions[pin.joint] - centre) <= room}  # fmt: skip
+
+
+def _near(conflicts: Conflicts, strap: Strap) -> set[int]:
+    return {k for k, near in enumerate(conflicts.blocked) if strap.part in near}
+
+
+def _with_straps(
+    assembly: Assembly, conflicts: Conflicts, paths: np.ndarray, sizes: Sizes, chosen: tuple
+) -> Conflicts:
+    """The conflicts with each chosen part's outline grown by its sheave's disc: other parts
+    and the sheaves of other straps keep a width and the clearance from it, other pins their
+    reach; the pins it frees are no longer kept off its layer."""
+    points = paths[..., 0] + 1j * paths[..., 1]
+    edges = hull_edges(assembly, paths[:, 0])
+    owner = np.array([e[0] for e in edges])
+    start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]
+    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    reach = (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance + step
+    distance, blocked = conflicts.distance.copy(), [list(b) for b in conflicts.blocked]
+    for strap in chosen:
+        centre, a = points[strap.joint], strap.part
+        to_edges = point_segment(centre, start, end).min(-1) - strap.radius
+        for q in range(1, len(assembly.parts)):
+            if q != a:
+                distance[a, q] = distance[q, a] = min(distance[a, q], to_edges[owner == q].min())
+        for other in chosen:
+            if other.part != a:
+                apart = np.abs(centre - points[other.joint]).min() - strap.radius - other.radius
+                distance[a, other.part] = min(distance[a, other.part], apart)
+                distance[other.part, a] = distance[a, other.part]
+        inside = _inside(assembly, paths[:, 0], sizes, strap)
+        for k, pin in enumerate(assembly.pins):
+            if k in inside:
+                blocked[k] = [q for q in blocked[k] if q != a]
+            elif a not in pin.members and a not in blocked[k] and (
+                np.abs(points[pin.joint] - centre).min() - strap.radius < reach
+            ):
+                blocked[k].append(a)
+    near = distance < sizes.link_width + sizes.clearance + step
+    np.fill_diagonal(near, False)
+    near[0], near[:, 0] = False, False
+    return replace(conflicts, parts=near, blocked=blocked, distance=distance)
+
+
+def _layered(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout | None:
+    """Layers with every ground pin whole, else held from both plates; None if neither."""
+    for stubs in (False, True):
+        try:
+            return stack_layers(assembly, conflicts, sizes, stubs=stubs)
+        except NoFlatLayers:
+            continue
+    return None
+
+
+def _passing(
+    assembly: Assembly, positions: np.ndarray, sizes: Sizes, layout: Layout, strap: Strap
+) -> Strap:
+    """The strap with the pins (rods) that cross its layer through its sheave."""
+    layer = int(layout.layers[strap.part])
+    spans = {k: [span] for k, span in enumerate(layout.pin_spans)}
+    for k, span in layout.cover_stubs.items():
+        spans[k].append(span)
+    passing = tuple(sorted(k for k in _inside(assembly, positions, sizes, strap)
+                           if any(lo <= layer <= hi for lo, hi in spans[k])))  # fmt: skip
+    return replace(strap, passing=passing)
