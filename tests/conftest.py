@@ -1,6 +1,7 @@
 """Shared fixtures, and the hypothesis profiles: derandomised in CI, random locally."""
 
 import os
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
@@ -27,23 +28,32 @@ def one_thread():
     torch.set_num_threads(threads)
 
 
-@pytest.fixture(scope="module")
-def straps_off():
-    """No eccentric straps (`linkd.export.strapped`): the mechanisms that test the constructions
-    tried after them are built with straps when those are on."""
+@contextmanager
+def no_straps():
+    """No eccentric straps (`linkd.export.strapped`) within."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(strapped, "MAX_STRAPS", 0)
         yield
 
 
 @pytest.fixture(scope="module")
+def straps_off():
+    """No straps: the mechanisms that test the constructions tried after them are built with
+    straps when those are on."""
+    with no_straps():
+        yield
+
+
+@pytest.fixture(scope="module")
 def pool():
     """Small generated designs; the first one can be built in flat layers, straight or bent (not
-    every valid mechanism can: its export is refused or splits plates and uses brackets). The
+    every valid mechanism can: its export is refused, uses straps or splits plates and uses
+    brackets). The
     first generated design needs a bracket and holds a smaller linkage tracing its very path,
     which the design tests would deliver instead of the sample itself."""
     graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
     flat = ExportOptions(brackets=False)
-    first = next((k for k, g in enumerate(graphs) if buildable(from_graph(g), flat)), None)
+    with no_straps():
+        first = next((k for k, g in enumerate(graphs) if buildable(from_graph(g), flat)), None)
     assert first is not None, "no exportable design in the pool"
     return np.concatenate([graphs[first:], graphs[:first]])
