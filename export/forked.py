@@ -36,7 +36,7 @@ from .layers import (
     stack_layers,
 )
 from .options import Sizes
-from .parts import CRANK, Assembly, Pin
+from .parts import Assembly, Pin
 
 MAX_FORKS = 60  # layer searches per width before the construction gives up
 
@@ -102,10 +102,9 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
 def _drivable(assembly: Assembly, fork: tuple[int, int]) -> bool:
     """Whether a motor in the frame still drives the crank: a fork of another part may not
     cut the pin at the motor pivot, where the crank would turn on a rod of that part."""
-    crank = next(h for h in assembly.hinges if h.name == CRANK)
     part, shaft = fork
     cut = set(assembly.parts[part].joints) - {shaft}
-    return part == crank.child or crank.joint not in cut
+    return part == assembly.crank.child or assembly.crank.joint not in cut
 
 
 def _problem(

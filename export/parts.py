@@ -68,6 +68,11 @@ class Assembly:
     pins: list[Pin]
     loops: list[Loop]
 
+    @property
+    def crank(self) -> Hinge:
+        """The motor's hinge: its joint is the motor pivot, its child the crank."""
+        return next(h for h in self.hinges if h.name == CRANK)
+
 
 def rigid_parts(mech: Mechanism) -> list[Part]:
     """Group joints into rigid bodies: links merge when they form a triangle or share two joints."""

@@ -27,7 +27,7 @@ import numpy as np
 
 from .layers import Conflicts, Layout, NoFlatLayers, Strap, find_conflicts, hull_edges, stack_layers
 from .options import Sizes
-from .parts import CRANK, Assembly
+from .parts import Assembly
 from .planar import convex_hull, cross, point_segment
 
 MAX_STRAPS = 120  # layer searches per width before the construction gives up
@@ -71,7 +71,7 @@ def _candidates(
                 for j in set(assembly.parts[a].joints) & set(part.joints) - {pin.joint}:
                     r = float(np.linalg.norm(positions[pin.joint] - positions[j])) + margin
                     radius[a, j, b] = max(radius.get((a, j, b), 0.0), r)
-    motor = next(h.joint for h in assembly.hinges if h.name == CRANK)
+    motor = assembly.crank.joint
     out = []
     for (a, j, b), r in sorted(radius.items()):
         others = positions[[k for k in assembly.parts[a].joints if k != j]]

@@ -48,9 +48,8 @@ def straps_off():
 def pool():
     """Small generated designs; the first one can be built in flat layers, straight or bent (not
     every valid mechanism can: its export is refused, uses straps or splits plates and uses
-    brackets). The
-    first generated design needs a bracket and holds a smaller linkage tracing its very path,
-    which the design tests would deliver instead of the sample itself."""
+    brackets). The first generated design needs a bracket and holds a smaller linkage tracing
+    its very path, which the design tests would deliver instead of the sample itself."""
     graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
     flat = ExportOptions(brackets=False)
     with no_straps():

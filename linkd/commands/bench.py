@@ -169,8 +169,7 @@ def generator(args: argparse.Namespace) -> int:
 def export(args: argparse.Namespace) -> int:
     """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
     tangled for flat layers, straight, bent, strapped, split, on brackets, on ground stubs or
-    forked, is refused
-    by the export and counted as such."""
+    forked, is refused by the export and counted as such."""
     import tempfile
     from collections import Counter
 
