@@ -56,6 +56,9 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  strapped_layers: "eccentric straps", braced_layers: "split plates and brackets",
                  forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
+# Costly searches: after the usual width they are tried at the narrowest, where every size is
+# smallest and so are the conflicts; where that does not layer, no width between would.
+SCREENED = frozenset({braced_layers, forked_layers})
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -128,7 +131,7 @@ def _layered(
     no width does, binary links bend around the pins in their way (`routing`), at each width,
     then parts turn on sheaves as eccentric straps (`strapped`), and then plates are cut into
     arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
-    `options.brackets` is off). Widths the user gave
+    `options.brackets` is off), then a part forks; those two are SCREENED. Widths the user gave
     are kept (the other constructions are still tried; ValueError when nothing works). quick:
     straight links at the first width only. `progress` is told each construction and width."""
     sizes = resolve_sizes(mech, assembly.parts, options)
@@ -148,14 +151,24 @@ def _layered(
 
     first = None
     for layering in layerings:
-        for size in tries:
+        screened = layering in SCREENED and len(tries) > 2
+        narrowest = None  # a screened construction's layout at the narrowest width
+        for size in [tries[0], tries[-1], *tries[1:-1]] if screened else tries:
             fraction = size.link_width / sizes.link_width
             width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
             progress(f"layering {CONSTRUCTIONS[layering]} at {width}")
             try:
-                return size, layering(assembly, paths(size), size)
+                layout = layering(assembly, paths(size), size)
             except ValueError as exc:
                 first = first or exc
+                if screened and size is tries[-1]:
+                    break  # the loosest width does not layer: the ones between would not either
+                continue
+            if not (screened and size is tries[-1]):
+                return size, layout
+            narrowest = size, layout  # but a wider one between may layer too
+        if narrowest is not None:
+            return narrowest
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
     culprits = ""
     if not quick:  # which pins, for the designer to move: found at the narrowest width tried

@@ -12,6 +12,7 @@ from linkd.export.layers import assign_layers, sweep
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
 from linkd.mechanism import Mechanism
+from linkd.verified import export_verified
 from linkd.verify import verify_output
 
 # Generated (seed 2026, no. 19): the coupler sweeps over the crank pivot and the crank tip over
@@ -78,11 +79,13 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     told = []
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
         export_mechanism(SNARLED, tmp_path, {"mjcf"}, progress=told.append)
-    constructions = ("straight parts", "bent links", "eccentric straps",
-                     "split plates and brackets", "forked parts")  # fmt: skip
     widths = ("the usual width", "0.5 of the usual width", "0.25 of the usual width")
-    assert told == [f"layering {c} at {w}" for c in constructions for w in widths] + [
-        "none layers: finding the pins that keep it from layering"]  # fmt: skip
+    plain = [f"layering {c} at {w}" for c in ("straight parts", "bent links", "eccentric straps")
+             for w in widths]  # fmt: skip
+    # the costly ones skip half the width where a quarter does not layer
+    screened = [f"layering {c} at {w}" for c in ("split plates and brackets", "forked parts")
+                for w in widths[::2]]  # fmt: skip
+    assert told == plain + screened + ["none layers: finding the pins that keep it from layering"]
     passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
@@ -107,3 +110,29 @@ def test_planted_collision_in_a_two_plate_ground_is_caught(tmp_path):
         f'pos="0 0 {cover.group(1)}"', f'pos="0 0 {lowered:.12g}"')))  # fmt: skip
     report = verify_output(tmp_path, write=False)
     assert "collisions" in report.failed
+
+
+# Generated (seed 2026, no. 103 of 200, scaled to 100 mm): no construction layers it at the
+# usual width; split plates and brackets do at a quarter of it, not at half of it.
+QUARTERED = Mechanism(
+    [(-39.694, -17.689), (-22.672, -38.768), (-71.457, -83.274), (-80.267, 26.146),
+     (31.015, 75.215), (49.055, -65.088), (-19.621, -98.023), (44.129, 63.307), (56.764, 22.542),
+     (-28.223, -48.311), (-82.102, 42.635), (-78.456, -39.159)],
+    [1, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 7), (1, 3), (1, 4), (1, 7), (2, 3), (2, 8), (3, 4), (3, 6), (3, 9), (5, 6),
+     (6, 8), (6, 10), (6, 11), (7, 10), (8, 9), (10, 11)],
+    (0, 1), 11,
+)  # fmt: skip
+
+
+def test_a_costly_construction_is_screened_at_a_quarter_width_before_half(tmp_path):
+    told = []
+    result, report = export_verified(QUARTERED, tmp_path, {"mjcf"}, progress=told.append)
+    split = [t for t in told if t.startswith("layering split plates")]
+    assert split == ["layering split plates and brackets at the usual width",
+                     "layering split plates and brackets at 0.25 of the usual width",
+                     "layering split plates and brackets at 0.5 of the usual width"]  # fmt: skip
+    usual = resolve_sizes(QUARTERED, assemble(QUARTERED).parts, None).link_width
+    assert result.sizes["link_width"] == pytest.approx(usual / 4)  # half did not layer
+    assert any("arm_of" in part for part in result.parts)
+    assert report.passed, report.failed
