@@ -57,7 +57,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
-# smallest and so are the conflicts; where that does not layer, no width between would.
+# smallest and so are the conflicts (a layering at a wider width is one there too); where the
+# search finds none there, the widths between are not tried.
 SCREENED = frozenset({braced_layers, forked_layers})
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
@@ -162,7 +163,7 @@ def _layered(
             except ValueError as exc:
                 first = first or exc
                 if screened and size is tries[-1]:
-                    break  # the loosest width does not layer: the ones between would not either
+                    break  # none at the loosest width: the ones between are not tried
                 continue
             if not (screened and size is tries[-1]):
                 return size, layout
