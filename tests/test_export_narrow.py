@@ -66,6 +66,20 @@ def test_refused_at_the_default_width_is_built_with_narrower_links_and_verified(
     assert report.passed, report.failed
 
 
+def test_export_says_when_its_links_are_narrower(tmp_path, capsys):
+    from linkd.cli import main
+
+    mech = tmp_path / "tangled.json"
+    TANGLED.save(mech)
+    assert main(["export", str(mech), "--out", str(tmp_path / "out"), "--export", "mjcf"]) == 0
+    usual = resolve_sizes(TANGLED, assemble(TANGLED).parts, None).link_width
+    said = capsys.readouterr().out
+    assert f"links {usual / 2:.3g} mm wide, 0.5 of the usual width" in said
+    assert main(["export", str(mech), "--out", str(tmp_path / "given"),
+                 "--export", "mjcf", "--link-width", f"{usual / 2}"]) == 0  # fmt: skip
+    assert "usual width" not in capsys.readouterr().out  # a width the user gave is the usual one
+
+
 def test_a_width_the_user_gives_is_kept(tmp_path):
     from linkd.export import ExportOptions
 
