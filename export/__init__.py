@@ -72,6 +72,7 @@ class ExportResult:
     sizes: dict = field(default_factory=dict)  # resolved sizes, mechanism units
     min_gap: float = float("inf")  # least in-plane gap between plates of one layer, mech units
     minimal: bool = True  # the layer count is proved minimal
+    narrowed: float = 1.0  # link width over the usual one: below 1 where no wider one layered
 
 
 def export_mechanism(
@@ -100,7 +101,9 @@ def export_mechanism(
         raise ValueError(f"invalid mechanism: {status.reason}")
     assembly = assemble(mech)
     say = progress or (lambda text: None)
-    sizes, layout = _layered(mech, assembly, options or ExportOptions(), progress=say)
+    options = options or ExportOptions()
+    sizes, layout = _layered(mech, assembly, options, progress=say)
+    narrowed = sizes.link_width / resolve_sizes(mech, assembly.parts, options).link_width
     say(f"writing {layout.count} layers of parts")
     files: list[Path] = []
     meshes, wholes, volumes = {}, {}, {}
@@ -116,7 +119,7 @@ def export_mechanism(
     )
     files.append(Path("mechanism.json"))
     return ExportResult(layout.count, parts, sorted(files), time.perf_counter() - start,
-                        sizes.to_dict(), layout.min_gap, layout.minimal)  # fmt: skip
+                        sizes.to_dict(), layout.min_gap, layout.minimal, narrowed)  # fmt: skip
 
 
 def _layered(

@@ -181,8 +181,10 @@ def run(args: argparse.Namespace) -> int:
         return 1
     d, r = outcome.design, outcome.report
     m = d.measures
+    narrowed = d.export.narrowed
+    narrower = f" (links {narrowed:.2g} of the usual width)" if narrowed < 1 else ""
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
-          f"{d.export.layers} layers, verified in MuJoCo")  # fmt: skip
+          f"{d.export.layers} layers{narrower}, verified in MuJoCo")  # fmt: skip
     chosen = " (chosen by --path auto)" if args.path == "auto" else ""
     stroke = ""
     if m.crank_range_deg is not None:

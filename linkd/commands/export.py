@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     given = {name: getattr(args, name) for name in SIZES if getattr(args, name) is not None}
     options = ExportOptions(**given)
     try:
-        usual = resolve_sizes(mech, rigid_parts(mech), options).link_width
+        resolve_sizes(mech, rigid_parts(mech), options)
     except ValueError as exc:
         raise InputError(f"{args.mechanism}: {exc}") from None
     out = Path(args.out) if args.out else fresh_name(Path(f"{Path(args.mechanism).stem}-export"))
@@ -105,8 +105,8 @@ def run(args: argparse.Namespace) -> int:
         return 1
     kinds = ", ".join(f"{n} {kind}" for kind, n in _counts(result.parts).items())
     width = result.sizes["link_width"]
-    narrower = (f"; links {width:.3g} {mech.units} wide, {width / usual:.2g} of the usual width "
-                "(no wider layering found)") if width < usual * (1 - 1e-9) else ""  # fmt: skip
+    narrower = (f"; links {width:.3g} {mech.units} wide, {result.narrowed:.2g} of the usual width "
+                "(no wider layering found)") if result.narrowed < 1 else ""  # fmt: skip
     print(f"{out}: {result.layers} layers; parts: {kinds}{narrower}; "
           f"exported in {result.seconds:.2f} s")  # fmt: skip
     if verification:
