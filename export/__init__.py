@@ -156,7 +156,7 @@ def _layered(
     first = None
     for layering in layerings:
         screened = layering in SCREENED and len(tries) > 2
-        narrowest = None  # a screened construction's layout at the narrowest width
+        fallback = None  # a screened construction's layout at the narrowest width
         for size in [tries[0], tries[-1], *tries[1:-1]] if screened else tries:
             fraction = size.link_width / sizes.link_width
             width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
@@ -170,9 +170,9 @@ def _layered(
                 continue
             if not (screened and size is tries[-1]):
                 return size, layout
-            narrowest = size, layout  # but a wider one between may layer too
-        if narrowest is not None:
-            return narrowest
+            fallback = size, layout  # but a wider one between may layer too
+        if fallback is not None:
+            return fallback
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
     culprits = ""
     if not quick:  # which pins, for the designer to move: found at the narrowest width tried

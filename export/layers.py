@@ -155,9 +155,8 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
         out.append(Plate(f"{ground.name}_bracket{k}", 0, (b.joint,), b.layer, posts=(b.post,)))
     straps = {strap.part: strap for strap in layout.straps}
     for strap in layout.straps:
-        name = f"{assembly.parts[strap.part].name}_sheave"
         through = (assembly.pins[k].joint for k in strap.passing)
-        out.append(Plate(name, strap.sheave_of, (strap.joint, *through),
+        out.append(Plate(sheave_name(assembly, strap), strap.sheave_of, (strap.joint, *through),
                          int(layout.layers[strap.part]), sheave=strap.radius))  # fmt: skip
     for p, part in enumerate(assembly.parts[1:], start=1):
         if p in straps:
@@ -171,6 +170,11 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
             bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
             out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
     return out
+
+
+def sheave_name(assembly: Assembly, strap: Strap) -> str:
+    """The sheave's plate and body: named after the strap that turns on it."""
+    return f"{assembly.parts[strap.part].name}_sheave"
 
 
 def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import Layout, Plate, plate_points, plates, post_spans
+from .layers import Layout, Plate, plate_points, plates, post_spans, sheave_name
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 from .planar import convex_hull
@@ -264,7 +264,8 @@ def build_mjcf(
             ET.SubElement(asset, "mesh", name=name, file=path, inertia=inertia)
     b.bodies_tree(ET.SubElement(root, "worldbody"), meshes or {})
     contact = ET.SubElement(root, "contact")
-    for rod in pin_rods(assembly, layout):
+    rods = pin_rods(assembly, layout)
+    for rod in rods:
         b.rod(rod.hub, rod.name, rod.joint, rod.span)
         for m in rod.members:
             if m != rod.hub:
@@ -272,10 +273,10 @@ def build_mjcf(
     for shaft in layout.shafts:
         b.rod(shaft.part, shaft.name, shaft.joint, shaft.span)
     for strap in layout.straps:  # the strap turns on its sheave, the pins pass through it
-        name = f"{assembly.parts[strap.part].name}_sheave"
+        name = sheave_name(assembly, strap)
         ET.SubElement(contact, "exclude", body1=name, body2=assembly.parts[strap.part].name)
         through = {strap.joint, *(assembly.pins[k].joint for k in strap.passing)}
-        for rod in pin_rods(assembly, layout):
+        for rod in rods:
             if rod.joint in through:
                 ET.SubElement(contact, "exclude", body1=name, body2=rod.name)
     equality = ET.SubElement(root, "equality")
