@@ -26,12 +26,24 @@ def test_kinematics_target_prints_its_throughput(capsys):
 
 
 def test_export_target_exports_and_verifies_unseen_mechanisms(capsys):
-    assert main(["bench", "export", "--count", "4", "--seed", "5"]) == 0
+    assert main(["bench", "export", "--count", "4", "--seed", "5", "--max-joints", "9"]) == 0
     out = capsys.readouterr().out
+    assert "4 random mechanisms of 5 to 9 joints" in out
     outcomes = ("verified", "refused", "failed verification")
     counts = [int(line.split()[-1]) for line in out.splitlines()
               if line.strip().startswith(outcomes)]  # fmt: skip
     assert sum(counts) == 4 and "failed verification" not in out
+
+
+BAD_JOINTS = [["--min-joints", "4"], ["--min-joints", "9", "--max-joints", "8"],
+              ["--max-joints", "21"]]  # fmt: skip
+
+
+@pytest.mark.parametrize("bounds", BAD_JOINTS)
+def test_export_target_refuses_joint_counts_it_cannot_generate(capsys, bounds):
+    assert main(["bench", "export", "--count", "1", *bounds]) == 2
+    err = capsys.readouterr().err
+    assert "5 <= --min-joints <= --max-joints <= 20" in err and len(err.strip().splitlines()) == 1
 
 
 @pytest.mark.skipif(not shutil.which("g++"), reason="torch.compile needs a C++ compiler")

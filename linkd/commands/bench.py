@@ -12,6 +12,8 @@ import re
 import time
 from pathlib import Path
 
+from linkd.errors import InputError
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="measure throughput (kinematics, generator, export, design)")
@@ -36,8 +38,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.set_defaults(run=generator)
 
     e = targets.add_parser("export", help="export and verify random mechanisms no test has seen")
-    e.add_argument("--count", type=int, default=100, help="random mechanisms (4 to 20 joints)")
+    e.add_argument("--count", type=int, default=100, help="random mechanisms")
     e.add_argument("--seed", type=int, default=2026)
+    e.add_argument("--min-joints", type=int, default=5, help="fewest joints of a mechanism")
+    e.add_argument("--max-joints", type=int, default=20, help="most joints of a mechanism")
     e.add_argument("--size", type=float, default=100.0, help="half the box they span, in mm")
     e.set_defaults(run=export)
 
@@ -167,9 +171,10 @@ def generator(args: argparse.Namespace) -> int:
 
 
 def export(args: argparse.Namespace) -> int:
-    """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms; a mechanism too
-    tangled for flat layers, straight, bent, strapped, split, on brackets, on ground stubs or
-    forked, is refused by the export and counted as such."""
+    """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms of `--min-joints`
+    to `--max-joints` joints; a mechanism too tangled for flat layers, straight, bent, strapped,
+    split, on brackets, on ground stubs or forked, is refused by the export and counted, and
+    named by its number in the run (`generate`'s order) so it can be rebuilt."""
     import tempfile
     from collections import Counter
 
@@ -178,14 +183,19 @@ def export(args: argparse.Namespace) -> int:
     from linkd.export import TIMESTEP
     from linkd.export.options import resolve_sizes
     from linkd.export.parts import assemble
-    from linkd.generator import generate
+    from linkd.generator import MAX_NODES, GeneratorSettings, generate
     from linkd.geometry import Similarity
     from linkd.graph import from_graph
     from linkd.verified import export_verified
 
-    graphs = generate(args.count, args.seed).graphs
+    if not 5 <= args.min_joints <= args.max_joints <= MAX_NODES:
+        raise InputError(f"joint counts must satisfy 5 <= --min-joints <= --max-joints <= "
+                         f"{MAX_NODES}, got {args.min_joints} and {args.max_joints}")  # fmt: skip
+    settings = GeneratorSettings(min_nodes=args.min_joints, max_nodes=args.max_joints)
+    graphs = generate(args.count, args.seed, settings).graphs
     outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
-    for graph in graphs:
+    refused_ones = []  # which were refused: their numbers in the run (to rebuild them)
+    for number, graph in enumerate(graphs):
         mech = from_graph(graph, Similarity(scale=args.size))
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
         with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
@@ -195,6 +205,7 @@ def export(args: argparse.Namespace) -> int:
             except ValueError:
                 outcome["refused (no flat layering)"] += 1
                 refusals.append(time.perf_counter() - start)
+                refused_ones.append(f"no. {number} ({len(mech.positions)} joints)")
                 continue
             seconds.append(time.perf_counter() - start)
         layers.append(result.layers)
@@ -224,7 +235,8 @@ def export(args: argparse.Namespace) -> int:
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
-    print(f"export: {len(graphs)} random mechanisms (seed {args.seed})")
+    print(f"export: {len(graphs)} random mechanisms of {args.min_joints} to {args.max_joints} "
+          f"joints (seed {args.seed})")  # fmt: skip
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
@@ -242,6 +254,7 @@ def export(args: argparse.Namespace) -> int:
     if refusals:  # what a user waits to be told no
         print(f"  seconds to refuse            median {np.median(refusals):.2f}, "
               f"max {max(refusals):.2f}")  # fmt: skip
+        print(f"  the refused ones             {', '.join(refused_ones)}")
     return 0
 
 
