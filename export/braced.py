@@ -91,6 +91,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     helds = [c for r in range(len(ground) + 1) for c in combinations(ground, r)]
     found, refusal = _first(layered, lambda: _splits(stars), helds, MAX_SEARCHES, spent=1)
     if found is None:  # then cut along the plates' own links too, with a budget of its own
+
         def trees() -> Iterator[dict]:
             return (s for s in _splits(ways) if any(w not in stars[q] for q, w in s.items()))
 

@@ -84,9 +84,7 @@ def strap_meshes(
     ]
 
 
-def sheave_mesh(
-    points: np.ndarray, radius: float, hole_diameter: float, thickness: float
-) -> Solid:
+def sheave_mesh(points: np.ndarray, radius: float, hole_diameter: float, thickness: float) -> Solid:
     """A sheave: a disc of `radius` round points[0], with a pin hole at every point."""
     import manifold3d
 

@@ -135,8 +135,10 @@ def _with_straps(
         for k, pin in enumerate(assembly.pins):
             if k in inside:
                 blocked[k] = [q for q in blocked[k] if q != a]
-            elif a not in pin.members and a not in blocked[k] and (
-                np.abs(points[pin.joint] - centre).min() - strap.radius < reach
+            elif (
+                a not in pin.members
+                and a not in blocked[k]
+                and (np.abs(points[pin.joint] - centre).min() - strap.radius < reach)
             ):
                 blocked[k].append(a)
     near = distance < sizes.link_width + sizes.clearance + step

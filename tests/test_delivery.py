@@ -1,7 +1,6 @@
 """Delivery passes over designs the export refuses, quickly once a few have been refused
 (linkd.design.pipeline._deliver)."""
 
-
 import numpy as np
 import pytest
 from test_export_narrow import TANGLED

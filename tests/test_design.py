@@ -47,8 +47,14 @@ def pool_proposer(pool):
 
 
 def options(**changes) -> DesignOptions:
-    settings = dict(candidates=12, time_budget=600, refine_settings=QUICK, formats={"mjcf"},
-                    atlas=False, rounds=1)  # the atlas and later rounds: test_atlas.py
+    settings = dict(
+        candidates=12,
+        time_budget=600,
+        refine_settings=QUICK,
+        formats={"mjcf"},
+        atlas=False,
+        rounds=1,
+    )  # the atlas and later rounds: test_atlas.py
     return DesignOptions(**{**settings, **changes})
 
 

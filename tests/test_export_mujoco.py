@@ -51,7 +51,10 @@ def _cases() -> dict:
     cases["millimetre_crank_rocker"] = (classic.crank_rocker(), both, None)  # 1 mm crank
     # 0.12 mm across: its parts' gaps are microns, near MuJoCo's own mesh distance tolerance
     cases["tenth_millimetre_crank_rocker"] = (
-        classic.crank_rocker().transformed(Similarity(0.03)), both, None)
+        classic.crank_rocker().transformed(Similarity(0.03)),
+        both,
+        None,
+    )
     # plates 1.5 um wide: meshes under MuJoCo's volume floor for an exact inertia
     cases["thin_plates"] = (classic.crank_rocker(), both, ExportOptions(link_width=0.0015))
     for k, mech in enumerate(_generated()):

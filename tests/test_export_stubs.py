@@ -2,7 +2,6 @@
 layer is built with a pin in the base and a stub from the cover, verified, and a stub moved
 onto a passing part's layer is caught."""
 
-
 import pytest
 import trimesh
 from planted import collision_detail, editable_copy

@@ -2,7 +2,6 @@
 of arms can layer is built as a crankshaft, verified in MuJoCo, and a planted collision of one
 of its arms is caught."""
 
-
 import pytest
 import trimesh
 from planted import collision_detail, editable_copy

@@ -36,8 +36,10 @@ def test_every_default_is_shown_and_every_command_says_what_it_does(capsys):
         assert command.description and " ".join(command.description.split()) in text
         for action in command._actions:
             default = action.default
-            if action.help and default not in (None, argparse.SUPPRESS) and not isinstance(
-                default, bool
+            if (
+                action.help
+                and default not in (None, argparse.SUPPRESS)
+                and not isinstance(default, bool)
             ):
                 assert f"default: {default}" in text or "default" in action.help, (name, action)
 

@@ -219,8 +219,9 @@ def test_sub_mechanism_examples_trace_their_curves(data):
     assert changed.float().mean() > 0.5  # most graphs have an intermediate coupler joint
     n_old = (graphs[..., VALID] > 0.5).sum(1)
     n_new = (new_graphs[..., VALID] > 0.5).sum(1)
-    assert torch.all(n_new[changed] < n_old[changed]) and torch.equal(new_graphs[~changed],
-                                                                    graphs[~changed])
+    assert torch.all(n_new[changed] < n_old[changed]) and torch.equal(
+        new_graphs[~changed], graphs[~changed]
+    )
     # each example is a valid linkage whose last joint traces its (normalised) curve
     distance = design_chamfer(new_graphs.numpy(), new_curves.numpy())
     assert np.all(distance < 1e-3)

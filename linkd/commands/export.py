@@ -89,8 +89,11 @@ def run(args: argparse.Namespace) -> int:
                 else:
                     result = export_mechanism(mech, stage, formats, options, stages.progress)
                     verification = None
-                proof = "" if verification is None else (
-                    ", verified in MuJoCo" if verification.passed else ", failed in MuJoCo")
+                proof = (
+                    ""
+                    if verification is None
+                    else (", verified in MuJoCo" if verification.passed else ", failed in MuJoCo")
+                )
                 note(f"{result.layers} layers{proof}")
             timings = {"export_s": result.seconds}
             if verification:

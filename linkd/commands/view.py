@@ -15,8 +15,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("view", help="play an output folder's mechanism in the browser (meshcat)")
     p.add_argument("out", help="output folder holding mechanism.json")
     p.add_argument("--html", action="store_true", help="only write OUT/animation.html")
-    p.add_argument("--curve", help="target curve CSV to draw beside the traced path (default: the "
-                   "one OUT/report.json names, if it exists)")
+    p.add_argument(
+        "--curve",
+        help="target curve CSV to draw beside the traced path (default: the "
+        "one OUT/report.json names, if it exists)",
+    )
     p.set_defaults(run=run)
 
 

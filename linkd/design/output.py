@@ -65,8 +65,9 @@ def deliver(
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
     try:
-        export, report = export_verified(mech, folder, set(formats) | {"mjcf"},
-                                         ExportOptions(brackets=brackets))
+        export, report = export_verified(
+            mech, folder, set(formats) | {"mjcf"}, ExportOptions(brackets=brackets)
+        )
         why = None if report.passed else "failed_verification"
     except ValueError:
         why = "unbuildable"

@@ -276,8 +276,10 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 first = len(candidates)
                 candidates = merged(candidates, found)
                 placed = np.concatenate([placed, found.chamfer])
-                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
-                                                     refine_count, refine_count), int)
+                rows = first + np.array(
+                    diverse_best(found.batch, np.arange(len(found)), refine_count, refine_count),
+                    int,
+                )
                 progress = _progress(stages, len(rows), nearby_settings)
                 done = refine_nearby(candidates, rows, progress)
                 note(f"{len(rows)} designs, {done} iterations, "
