@@ -42,7 +42,7 @@ from .mjcf import (
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
-from .refusal import blocking_pins
+from .refusal import why_refused
 from .rods import keyed, pin_rods
 from .routing import bent_layers
 from .strapped import strapped_layers
@@ -179,16 +179,11 @@ def _layered(
         progress("none layers: finding the pins that keep it from layering")
         narrowest = tries[-1]
         conflicts = find_conflicts(assembly, paths(narrowest), narrowest)
-        pins = blocking_pins(assembly, conflicts, narrowest)
-        if pins:
-            culprits = f"; with straight parts, {_listed(pins)} alone cannot all be kept clear"
+        why = why_refused(assembly, conflicts, narrowest)
+        if why:
+            culprits = f"; with straight parts, {why} alone cannot all be kept clear"
     tried = f"straight, bent, strapped, split and forked parts{widths} tried{culprits}"
     raise ValueError(f"{first} ({tried})")
-
-
-def _listed(names: list[str]) -> str:
-    """ "a", "a and b", "a, b and c"."""
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def _write_meshes(

@@ -93,27 +93,33 @@ def test_what_bending_cannot_save_is_refused_in_one_line(tmp_path):
     assert "\n" not in str(refusal.value)
 
 
-def test_a_refusal_names_pins_that_alone_cannot_be_kept_clear(tmp_path):
-    """The pins named can be built round by no stack of straight parts at the narrowest width,
-    and each of them is needed for that: without any one, the others layer."""
+def test_a_refusal_names_pins_and_parts_that_alone_cannot_be_kept_clear(tmp_path):
+    """The pins named, each kept off the parts named with it, can be built round by no stack of
+    straight parts at the narrowest width, and each pin and each part is needed for that:
+    without any one, the rest layer."""
     with pytest.raises(ValueError) as refusal:
         export_mechanism(SNARLED, tmp_path, {"mjcf"})
     named = re.search(r"with straight parts, (.*) alone cannot", str(refusal.value)).group(1)
-    names = re.findall(r"pin_\d+", named)
+    passing = dict(re.findall(r"(pin_\d+) \(passed by ([^)]*)\)", named))
     assembly = assemble(SNARLED)
     usual = resolve_sizes(SNARLED, assembly.parts, None).link_width
     sizes = resolve_sizes(SNARLED, assembly.parts, ExportOptions(link_width=usual * NARROWER[-1]))
     conflicts = find_conflicts(assembly, sweep(SNARLED, sizes.link_width), sizes)
-    index = {pin.name: k for k, pin in enumerate(assembly.pins)}
-    assert 2 <= len(names) < len(assembly.pins)
+    pins = {pin.name: k for k, pin in enumerate(assembly.pins)}
+    parts = {part.name: q for q, part in enumerate(assembly.parts)}
+    blocked = {pin: [parts[name] for name in names.split(", ")] for pin, names in passing.items()}
+    assert 2 <= len(blocked) < len(assembly.pins)
+    assert set(re.findall(r"pin_\d+", named)) == set(blocked)  # every pin named with its parts
+    for pin, kept in blocked.items():
+        assert set(kept) <= set(conflicts.blocked[pins[pin]])
 
-    def layer(pins: list[str]) -> None:
-        keep = [index[name] for name in pins]
-        chosen = replace(assembly, pins=[assembly.pins[k] for k in keep])
-        stack_layers(chosen, replace(conflicts, blocked=[conflicts.blocked[k] for k in keep]),
-                     sizes)  # fmt: skip
+    def layer(chosen_blocked: dict[str, list[int]]) -> None:
+        chosen = replace(assembly, pins=[assembly.pins[pins[name]] for name in chosen_blocked])
+        stack_layers(chosen, replace(conflicts, blocked=list(chosen_blocked.values())), sizes)
 
     with pytest.raises(NoFlatLayers):
-        layer(names)
-    for name in names:
-        layer([other for other in names if other != name])
+        layer(blocked)
+    for name in blocked:
+        layer({other: kept for other, kept in blocked.items() if other != name})
+        for q in blocked[name]:
+            layer({**blocked, name: [r for r in blocked[name] if r != q]})
