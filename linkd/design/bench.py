@@ -22,6 +22,7 @@ import csv
 import json
 import tempfile
 import time
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
@@ -239,10 +240,7 @@ def totals(rows: list[dict]) -> dict:
         "skipped": {why: sum(r["skipped"].get(why, 0) for r in rows) for why in SKIP_REASONS},
         "best_skipped": sum(any(r["skipped"].values()) for r in rows),
         "passed_over": [(r["passed_over"], r["chamfer"]) for r in rows if r.get("passed_over")],
-        "found_by": {
-            name: sum(r["found_by"] == name for r in rows)
-            for name in sorted({r["found_by"] for r in rows if r["found_by"]})
-        },
+        "found_by": dict(sorted(Counter(r["found_by"] for r in rows if r["found_by"]).items())),
         "stages": stages(rows),
     }
 
