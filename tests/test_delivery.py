@@ -9,12 +9,13 @@ from test_rounds import STUBBORN
 from linkd import classic
 from linkd.batch import LinkageBatch
 from linkd.design import pipeline
-from linkd.design.output import skip_counts
+from linkd.design.output import PassedOver, keep_passed_over, skip_counts
 from linkd.design.pipeline import DesignOptions, NoDesign, _ranked
 from linkd.design.propose import Candidates
 from linkd.design.select import end_effector_path, measure
 from linkd.design.stages import Stages
 from linkd.geometry import Similarity
+from linkd.mechanism import Mechanism
 
 ROCKER = classic.crank_rocker()
 
@@ -54,7 +55,21 @@ def test_without_the_quick_checks_the_slower_constructions_are_tried(tmp_path, m
     assert _same(found, TANGLED) and skipped["unbuildable"] == 1
     # what was given up is in plain view: the refused design and its curve error
     error = measure(STUBBORN, end_effector_path(ROCKER)[0]).chamfer
-    assert passed == [{"reason": "unbuildable", "chamfer": pytest.approx(error)}]
+    assert [p.to_dict() for p in passed] == [
+        {"reason": "unbuildable", "chamfer": pytest.approx(error), "why": passed[0].why}
+    ]
+    assert passed[0].why.startswith("cannot be built from flat layers")
+    # and kept, with its figures and why, for the designer to build otherwise or to move
+    entry = keep_passed_over(passed[0], tmp_path)
+    kept = Mechanism.load(tmp_path / entry["folder"] / "mechanism.json")
+    assert _same(kept, STUBBORN) and kept.links == STUBBORN.links
+    assert kept.extra["passed_over"]["reason"] == "unbuildable"
+    assert kept.extra["metrics"]["chamfer"] == pytest.approx(error)
+
+
+def test_a_design_passed_over_unmeasured_is_not_kept(tmp_path):
+    entry = keep_passed_over(PassedOver("invalid"), tmp_path)
+    assert entry == {"reason": "invalid"} and not list(tmp_path.iterdir())
 
 
 def test_delivery_gives_up_after_its_quick_checks(tmp_path, monkeypatch):

@@ -104,7 +104,7 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
     assert deliver(SNARLED, target, tmp_path, {"mjcf"}, {}, passed=passed) is None
-    assert [p["reason"] for p in passed] == ["unbuildable"]
+    assert [p.reason for p in passed] == ["unbuildable"]
     assert not list(tmp_path.iterdir())
 
 

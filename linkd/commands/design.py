@@ -198,7 +198,9 @@ def run(args: argparse.Namespace) -> int:
     best = r["search"].get("best_passed_over")
     if best:  # the accuracy given up, in plain view
         error = f" (curve error {best['chamfer']:.4f})" if "chamfer" in best else ""
-        print(f"  a better-ranked design{error} was passed over: {PASSED_OVER[best['reason']]}")
+        kept = f" ({out / best['folder']}/mechanism.json)" if "folder" in best else ""
+        print(f"  a better-ranked design{error} was passed over: {PASSED_OVER[best['reason']]}"
+              f"{kept}")  # fmt: skip
     if "constraints" in r:
         print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
     for alt in outcome.alternatives:

@@ -28,6 +28,7 @@ from .select import Measures, measure
 
 MODEL_FILES = ("mechanism.xml", "scene.xml")
 SKIP_REASONS = ("invalid", "unbuildable", "failed_verification")  # why a design is passed over
+PASSED_OVER = "passed_over"  # the folder for the best design passed over, beside the delivered one
 
 
 @dataclass
@@ -41,6 +42,22 @@ class Delivered:
     folder: Path
 
 
+@dataclass
+class PassedOver:
+    """A better-ranked design that was not delivered: why (one of SKIP_REASONS, and in words:
+    the export's refusal or the checks MuJoCo failed) and, once measured, its curve error and
+    the mechanism itself, so that the user can see and keep what was given up."""
+
+    reason: str
+    chamfer: float | None = None
+    why: str = ""
+    mechanism: Mechanism | None = None
+
+    def to_dict(self) -> dict:
+        measured = {} if self.chamfer is None else {"chamfer": self.chamfer}
+        return {"reason": self.reason, **measured, **({"why": self.why} if self.why else {})}
+
+
 def deliver(
     mech: Mechanism,
     target: np.ndarray,
@@ -48,19 +65,19 @@ def deliver(
     formats: set[str],
     source: dict,
     timed: bool = False,
-    passed: list[dict] | None = None,
+    passed: list[PassedOver] | None = None,
     brackets: bool = True,
 ) -> Delivered | None:
     """Validate, export and verify `mech` into the empty `folder`; None (folder emptied) if it
-    fails any step, listed in `passed` with the step ("reason": "invalid", "unbuildable": the
-    export refused it, or "failed_verification") and, once measured, its curve error (what
-    the user gives up). `target` is the user's curve, in the mechanism's frame (`timed`: its
+    fails any step, listed in `passed` with the step ("invalid", "unbuildable": the export
+    refused it, or "failed_verification") and, once measured, its curve error (what the user
+    gives up). `target` is the user's curve, in the mechanism's frame (`timed`: its
     rows equally spaced in time; `brackets`: whether the export may split plates and hold
     ground pins on brackets)."""
     passed = [] if passed is None else passed
     status, _ = validate_mechanism(mech)
     if status != Status.VALID:
-        passed.append({"reason": "invalid"})
+        passed.append(PassedOver("invalid"))
         return None
     measures = measure(mech, target, timed)
     mech = mech.replace(extra={**mech.extra, "metrics": measures.to_dict(), "source": source})
@@ -68,19 +85,34 @@ def deliver(
         export, report = export_verified(
             mech, folder, set(formats) | {"mjcf"}, ExportOptions(brackets=brackets)
         )
-        why = None if report.passed else "failed_verification"
-    except ValueError:
-        why = "unbuildable"
-    if why:
+        reason = None if report.passed else "failed_verification"
+        why = f"MuJoCo's checks failed: {', '.join(report.failed)}"
+    except ValueError as refusal:
+        reason, why = "unbuildable", str(refusal)
+    if reason:
         _empty(folder)
-        passed.append({"reason": why, "chamfer": measures.chamfer})
+        passed.append(PassedOver(reason, measures.chamfer, why, mech))
         return None
     return Delivered(mech, measures, export, report, folder)
 
 
-def skip_counts(passed: list[dict]) -> dict[str, int]:
+def skip_counts(passed: list[PassedOver]) -> dict[str, int]:
     """How many designs were passed over for each of SKIP_REASONS."""
-    return {why: sum(p["reason"] == why for p in passed) for why in SKIP_REASONS}
+    return {why: sum(p.reason == why for p in passed) for why in SKIP_REASONS}
+
+
+def keep_passed_over(best: PassedOver, folder: Path) -> dict:
+    """Write the best design passed over, if it was measured, to `folder`/passed_over/
+    mechanism.json (its metrics, and why it was passed over, among its extra keys): a designer
+    may build it otherwise, or move the pins its refusal names. Its report.json entry."""
+    entry = best.to_dict()
+    if best.mechanism is not None:
+        mech = best.mechanism
+        mech = mech.replace(extra={**mech.extra, "passed_over": entry})
+        (folder / PASSED_OVER).mkdir()
+        mech.save(folder / PASSED_OVER / "mechanism.json")
+        entry["folder"] = PASSED_OVER
+    return entry
 
 
 def finish(design: Delivered, target: np.ndarray, formats: set[str], report: dict) -> None:

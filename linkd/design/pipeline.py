@@ -43,7 +43,7 @@ from linkd.scale import check_curve_size
 
 from .constrained import screen
 from .drawn import read_target
-from .output import Delivered, deliver, finish, skip_counts, summary
+from .output import Delivered, PassedOver, deliver, finish, keep_passed_over, skip_counts, summary
 from .propose import SOURCES, Candidates, Proposer
 from .prune import pruned
 from .refine import RefineSettings, single_thread
@@ -138,7 +138,7 @@ def design(
         report_search["constraints"] = o.constraints.to_dict()
     source = {"tool": f"linkd {__version__}", "command": "design", "curve": Path(curve_path).name,
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
-    passed: list[dict] = []  # the better designs passed over, best first
+    passed: list[PassedOver] = []  # the better designs passed over, best first
     try:
         with single_thread(), staged_output(out, force) as stage:
             inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
@@ -149,7 +149,7 @@ def design(
                                                      source, passed, ends)  # fmt: skip
             report_search["skipped"] = skip_counts(passed)
             if passed:
-                report_search["best_passed_over"] = passed[0]
+                report_search["best_passed_over"] = keep_passed_over(passed[0], stage)
             report_search["found_by"] = found.mechanism.extra["source"]["found_by"]
             report = {
                 "format": "linkd-design-report/1",
@@ -188,7 +188,7 @@ def _deliver(
     stages: Stages,
     stage: Path,
     source: dict,
-    passed: list[dict],
+    passed: list[PassedOver],
     ends: float,
 ) -> tuple[Delivered, list[dict], list]:
     """Verify designs from the best until one passes, listing in `passed` each better one passed
@@ -230,7 +230,7 @@ def _deliver(
                     break
                 quick += 1
                 if not buildable(mech, quick=True):  # not a try: the check costs little
-                    passed.append({"reason": "unbuildable"})
+                    passed.append(PassedOver("unbuildable"))
                     refused += 1
                     failed[key] = failed.get(key, 0) + 1
                     continue
