@@ -9,8 +9,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
 import textwrap
+import threading
 
 from linkd import __version__
 from linkd.errors import InputError
@@ -73,16 +75,33 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a CI job's timeout, `kill`), raised where the program is, so that it cleans up
+    as on Ctrl-C: no half-written output folder, no playback server left running."""
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    here = threading.current_thread() is threading.main_thread()
+    before = signal.signal(signal.SIGTERM, _terminate) if here else None
     try:
         return int(args.run(args) or 0)
     except InputError as exc:
         print(f"linkd: error: {exc}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("linkd: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("linkd: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if here:
+            signal.signal(signal.SIGTERM, before)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ of a valid linkage is one).
 from __future__ import annotations
 
 import importlib.resources
+import pickle
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,9 +45,15 @@ def load_model(path: str | Path | None = None, device: str = "cpu") -> LinkD:
             importlib.resources.files("linkd.assets") / "linkd.pt"
         ) as shipped:
             return load_model(shipped, device)
+    if Path(path).is_dir():
+        raise InputError(f"{path}: is a folder, not a checkpoint")
     if not Path(path).is_file():
         raise InputError(f"{path}: no such checkpoint")
-    return load_checkpoint(path, device)[0]
+    try:
+        return load_checkpoint(path, device)[0]
+    except (pickle.UnpicklingError, RuntimeError, EOFError, KeyError, TypeError) as exc:
+        kind = type(exc).__name__
+        raise InputError(f"{path}: not a linkd checkpoint (torch.load: {kind})") from None
 
 
 def empty_graphs(count: int, device: str | torch.device = "cpu") -> torch.Tensor:

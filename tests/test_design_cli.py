@@ -37,12 +37,14 @@ def test_missing_curve_and_bad_options_exit_2(tmp_path, monkeypatch, capsys):
     assert main(["design", "absent.csv"]) == 2
     assert "absent.csv" in capsys.readouterr().err
     curve = str(EXAMPLES / "ellipse.csv")
+    (tmp_path / "not_a_model.pt").write_text("weights")
     for args in (["--candidates", "0"], ["--export", "step"], ["--time-budget", "0"],
-                 ["--units", "furlong"], ["--strategy", "best"], ["--top", "-1"],
-                 ["--proposer", "oracle"]):  # fmt: skip
+                 ["--time-budget", "inf"], ["--units", "furlong"], ["--strategy", "best"],
+                 ["--top", "-1"], ["--proposer", "oracle"], ["--model", "not_a_model.pt"],
+                 ["--model", "."], ["--atlas", "not_a_model.pt"]):  # fmt: skip
         assert main(["design", curve, *args]) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1
-    assert list(tmp_path.iterdir()) == []
+    assert list(tmp_path.iterdir()) == [tmp_path / "not_a_model.pt"]
 
 
 def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, capsys):
@@ -82,3 +84,23 @@ def test_random_proposer_designs_blind_to_the_curve(tmp_path, monkeypatch):
     first, again = propose(curves, 3, 0), propose(curves + 1, 3, 0)
     assert first.shape == (6, 20, 24) and np.array_equal(first, again)  # blind and repeatable
     assert not np.array_equal(first, propose(curves, 3, 1))
+
+
+def test_a_terminated_design_leaves_nothing_behind(tmp_path):
+    """SIGTERM, as a CI job's timeout sends it, cleans up as Ctrl-C does."""
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "out"
+    run = subprocess.Popen([sys.executable, "-m", "linkd.cli", "design",
+                            str(EXAMPLES / "crescent.csv"), "--out", str(out)],
+                           stderr=subprocess.PIPE, text=True)  # fmt: skip
+    until = time.monotonic() + 60
+    while not list(tmp_path.glob(".out.*")) and time.monotonic() < until:
+        time.sleep(0.05)  # the staging folder appears once the curve is read
+    assert list(tmp_path.glob(".out.*")), "the design never began its output"
+    run.terminate()
+    _, err = run.communicate(timeout=60)
+    assert run.returncode == 143 and err.strip().splitlines() == ["linkd: terminated"]
+    assert list(tmp_path.iterdir()) == []

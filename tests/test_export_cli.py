@@ -66,6 +66,64 @@ def test_export_replaces_its_own_output_and_refuses_other_folders(tmp_path):
     assert (other / "mechanism.json").exists()
 
 
+def test_an_export_that_fails_verification_exits_1_and_is_kept_to_inspect(tmp_path, capsys):
+    # links far too wide for the crank rocker: its plates collide
+    out = tmp_path / "out"
+    mech = str(EXAMPLES / "crank_rocker.json")
+    assert main(["export", mech, "--out", str(out), "--link-width", "500"]) == 1
+    assert "failed verification: " in capsys.readouterr().out
+    report = json.loads((out / "report.json").read_text())
+    assert not report["verification"]["passed"] and "collisions" in report["verification"]["failed"]
+
+
+def test_an_output_beside_files_linkd_does_not_write_is_not_replaced(tmp_path, capsys):
+    # a project folder holding an earlier mechanism.json, the input and notes of one's own
+    project = tmp_path / "project"
+    project.mkdir()
+    mech = project / "mechanism.json"
+    classic.crank_rocker().save(mech)
+    (project / "notes.txt").write_text("mine")
+    assert main(["export", str(EXAMPLES / "crank_rocker.json"), "--out", str(project)]) == 2
+    assert "notes.txt" in capsys.readouterr().err
+    # --force replaces a folder, but never the one holding the input
+    assert main(["export", str(mech), "--out", str(project), "--force"]) == 2
+    assert "holds the input" in capsys.readouterr().err
+    assert sorted(p.name for p in project.iterdir()) == ["mechanism.json", "notes.txt"]
+
+
+def test_the_current_folder_is_never_the_output(tmp_path, monkeypatch, capsys):
+    mech = tmp_path / "crank.json"
+    classic.crank_rocker().save(mech)
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    for out in (".", str(work), str(tmp_path)):
+        assert main(["export", str(mech), "--out", out, "--force"]) == 2
+        assert "current folder" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["crank.json", "work"]
+
+
+def test_an_output_under_a_file_or_out_of_reach_is_refused(tmp_path, capsys):
+    mech = str(EXAMPLES / "crank_rocker.json")
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    assert main(["export", mech, "--out", str(afile / "sub")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+    assert main(["export", mech, "--out", "/proc/no/such"]) == 2
+    assert "cannot make the folder" in capsys.readouterr().err
+    assert not Path("/proc/no").exists()
+
+
+def test_a_failed_run_leaves_no_folders_it_made(tmp_path, monkeypatch):
+    from linkd import outdir
+
+    deep = tmp_path / "a" / "b" / "out"
+    with pytest.raises(RuntimeError), outdir.staged_output(deep):
+        assert deep.parent.is_dir()
+        raise RuntimeError("stopped part-way")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.parametrize(
     "args",
     [["--export", "step"], ["--hole-diameter", "1000"], ["--thickness", "-1"]],

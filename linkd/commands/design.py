@@ -145,8 +145,10 @@ def run(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value < (1 if name == "candidates" else 0):
             raise InputError(f"--{name} must be at least {1 if name == 'candidates' else 0}")
-    if not args.time_budget > 0:
-        raise InputError(f"--time-budget must be positive, got {args.time_budget}")
+    if not 0 < args.time_budget < float("inf"):
+        raise InputError(
+            f"--time-budget must be a positive number of seconds, got {args.time_budget}"
+        )
     if args.path not in PATH_KINDS:
         raise InputError(f"--path: expected one of {', '.join(PATH_KINDS)}, got {args.path!r}")
     if args.out:

@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else fresh_name(Path(f"{Path(args.mechanism).stem}-export"))
     stages = Stages()  # on a terminal: what is being tried, as the search can take a minute
     try:
-        with staged_output(out, args.force) as stage:
+        with staged_output(out, args.force, (Path(args.mechanism),)) as stage:
             begun = time.perf_counter()
             with stages.stage("export", "finding layers for the parts") as note:
                 if "mjcf" in formats:  # proved in MuJoCo, which also settles its time step
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if verification:
         failed = ", ".join(verification.failed)
         print("  verified in MuJoCo" if verification.passed else f"  failed verification: {failed}")
-    return 0
+    return 0 if verification is None or verification.passed else 1  # the folder kept to inspect
 
 
 def _extras(mech: Mechanism, stage: Path) -> dict[str, float]:

@@ -119,12 +119,14 @@ def quantise(descriptors: np.ndarray) -> np.ndarray:
 def load(path: str | Path | None = None) -> Atlas:
     """The atlas at `path` (default: the one shipped in linkd's assets)."""
     path = Path(path) if path else DEFAULT_PATH
+    if not path.is_file():
+        raise InputError(f"{path}: {'is a folder, not' if path.is_dir() else 'no such'} atlas")
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in _ARRAYS}
             meta = json.loads(str(data["meta"]))
-    except (OSError, KeyError, ValueError) as exc:
-        raise InputError(f"{path}: not a linkd atlas ({exc})") from exc
+    except (OSError, KeyError, ValueError):
+        raise InputError(f"{path}: not a linkd atlas (a .npz of linkd atlas build)") from None
     if meta.get("format") != FORMAT:
         raise InputError(f"{path}: not a {FORMAT} file")
     return Atlas(**arrays, meta=meta)

@@ -140,7 +140,7 @@ def design(
               "seed": o.seed, "strategy": o.strategy}  # fmt: skip
     passed: list[PassedOver] = []  # the better designs passed over, best first
     try:
-        with single_thread(), staged_output(out, force) as stage:
+        with single_thread(), staged_output(out, force, (Path(curve_path),)) as stage:
             inner = o.constraints.mapped(frame.inverse())  # in the target's normalised frame
             deadline = start + o.time_budget - DELIVERY_RESERVE
             candidates = search(goal, inner, o, proposer, stages, deadline, report_search)
