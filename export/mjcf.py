@@ -105,7 +105,9 @@ class _Builder:
     def bodies_tree(self, worldbody: ET.Element, meshes: dict[str, str]) -> None:
         """Nested bodies, parents first: each with its hinge (the ground has none) and plates."""
         every = plates(self.assembly, self.layout)
-        self.bodies[0] = ET.SubElement(worldbody, "body", name=self.assembly.parts[0].name)
+        ground = self.assembly.parts[0].name
+        self.bodies[0] = ET.SubElement(worldbody, "body", name=ground,
+                                       pos=_fmt(*self.origin[0] * self.unit, 0))  # fmt: skip
         for plate in every:
             if plate.part == 0:
                 self.plate(plate, meshes)
@@ -213,7 +215,7 @@ class _Builder:
         name = self.assembly.parts[0].name
         for k, (bracket, (lo, hi)) in enumerate(zip(self.layout.brackets, post_spans(self.layout))):
             bottom, top = lo * self.pitch, hi * self.pitch + self.thickness
-            x, y = np.asarray(bracket.post) * self.unit
+            x, y = (np.asarray(bracket.post) - self.origin[0]) * self.unit
             ET.SubElement(self.bodies[0], "geom", name=f"{name}_post{k}", type="cylinder",
                           size=_fmt(self.hole / 2, (top - bottom) / 2),
                           pos=_fmt(x, y, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip

@@ -162,8 +162,11 @@ def assemble(mech: Mechanism) -> Assembly:
 
 
 def part_origins(mech: Mechanism, assembly: Assembly) -> np.ndarray:
-    """(P, 2) body frame origin of every part: its hinge joint (the ground's is the origin)."""
+    """(P, 2) body frame origin of every part: its hinge joint (the ground's is the motor
+    pivot, so that meshes, which MuJoCo keeps in single precision, stay near their frame's
+    origin even for a mechanism far from the user's)."""
     origins = np.zeros((len(assembly.parts), 2))
+    origins[0] = mech.positions[mech.motor[0]]
     for h in assembly.hinges:
         origins[h.child] = mech.positions[h.joint]
     return origins

@@ -197,6 +197,8 @@ class Mechanism:
         ee = data.get("end_effector")
         if not _is_index(ee, n):
             raise fail(f"'end_effector' must be a joint index in 0..{n - 1}, got {ee!r}")
+        if fixed[ee]:
+            raise fail(f"'end_effector' {ee} is a fixed joint: it traces no path")
         crank_range = data.get("crank_range")
         if crank_range is not None:
             problem = crank_range_problem(crank_range)

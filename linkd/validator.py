@@ -41,23 +41,26 @@ class Validation:
         return np.stack([self.motion.x[rows, ee], self.motion.y[rows, ee]], -1)
 
 
-def _scale(positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """(B,) RMS distance of valid joints from their centroid."""
+def _centred(positions: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions less their valid joints' centroid (so that single precision keeps a mechanism
+    far from the origin apart), and (B,) the RMS distance of valid joints from it."""
     count = np.maximum(valid.sum(1, keepdims=True), 1)
     centroid = (positions * valid[..., None]).sum(1) / count
-    spread = (((positions - centroid[:, None]) ** 2).sum(-1) * valid).sum(1) / count[:, 0]
-    return np.sqrt(spread)
+    centred = positions - centroid[:, None]
+    spread = ((centred**2).sum(-1) * valid).sum(1) / count[:, 0]
+    return centred, np.sqrt(spread)
 
 
 def geometry_status(batch: LinkageBatch) -> np.ndarray:
     """(B,) ZERO_LENGTH_LINK / COINCIDENT_JOINTS / VALID from the assembly pose alone."""
-    pos = np.where(batch.valid[..., None], batch.positions, np.nan).astype(np.float32)
+    centred, scale = _centred(batch.positions, batch.valid)
+    pos = np.where(batch.valid[..., None], centred, np.nan).astype(np.float32)
     x, y = pos[..., 0], pos[..., 1]  # padding is nan, so it is close to nothing
     dx = x[:, :, None] - x[:, None, :]
     dy = y[:, :, None] - y[:, None, :]
     d2 = dx * dx
     d2 += dy * dy
-    tol = COINCIDENT * np.maximum(_scale(batch.positions, batch.valid), 1e-12)
+    tol = COINCIDENT * np.maximum(scale, 1e-12)
     close = d2 <= (tol**2).astype(np.float32)[:, None, None]
     status = np.zeros(len(batch), dtype=np.int64)
     rows = np.flatnonzero(close.sum((1, 2)) > batch.valid.sum(1))  # more than the diagonal

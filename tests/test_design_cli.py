@@ -104,3 +104,18 @@ def test_a_terminated_design_leaves_nothing_behind(tmp_path):
     _, err = run.communicate(timeout=60)
     assert run.returncode == 143 and err.strip().splitlines() == ["linkd: terminated"]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_one_shot_setting_is_the_models_single_sample_alone(tmp_path):
+    """CONTRACT §5: no atlas path or sub-mechanism stands in for an invalid sample (today seeds
+    0-3 are invalid on this curve and exit 1, seed 4 is delivered)."""
+    for seed in range(5):
+        out = tmp_path / str(seed)
+        args = ["--strategy", "oneshot", "--candidates", "1", "--no-refine", "--seed", str(seed)]
+        code = main(["design", str(EXAMPLES / "crescent.csv"), *args, "--out", str(out)])
+        if code == 0:
+            report = json.loads((out / "report.json").read_text())
+            assert report["search"]["found_by"] == "model"
+            assert set(report["search"]["sources"]) == {"model"}
+        else:
+            assert code == 1 and not out.exists()

@@ -133,7 +133,8 @@ def test_a_planted_collision_in_a_split_plate_or_a_bracket_is_caught(stacked, tm
         _moved(geoms[name], z=z("link_11_12"))
     else:  # the post, layers 0..5, at the middle of link_11_12 (layer 4)
         name = "ground_post0"
-        x, y = STACKED.positions[[11, 12]].mean(0) * 1e-3
+        middle = STACKED.positions[[11, 12]].mean(0)
+        x, y = (middle - STACKED.positions[STACKED.motor[0]]) * 1e-3  # the ground's frame
         _moved(geoms[name], xy=(x, y))
     assert name in collision_detail(tree, tmp_path)
 

@@ -55,6 +55,7 @@ def _valid_dict():
         (lambda d: d.update(motor=[1, 1]), "'motor'"),
         (lambda d: d.update(end_effector=True), "'end_effector'"),
         (lambda d: d.update(end_effector=5), "'end_effector'"),
+        (lambda d: d.update(end_effector=0), "fixed joint: it traces no path"),
     ],
 )
 def test_malformed_content_is_refused_with_its_reason(change, message):

@@ -93,3 +93,17 @@ def test_a_millimetre_sized_model_weighs_its_parts_in_proportion(tmp_path):
     assert density == 1200 and tiny_density > 1200
     np.testing.assert_allclose(tiny_mass / mass, 1e-9, rtol=1e-3)
     np.testing.assert_allclose(tiny_inertia / inertia, 1e-15, rtol=1e-3)
+
+
+@pytest.mark.parametrize("offset", [1e7, 1e9])  # 10 km and 1000 km, in mm
+def test_a_mechanism_far_from_the_origin_exports_and_verifies(tmp_path, offset):
+    """In the user's frame, far from its origin: the ground's meshes are written about the motor
+    pivot (MuJoCo keeps meshes in single precision), the validator compares joints about their
+    centroid and the pose solver asks only what rounding there allows."""
+    from linkd.validator import validate_mechanism
+    from linkd.verified import export_verified
+
+    mech = classic.crank_rocker().transformed(Similarity(100.0, translation=(offset, -offset)))
+    assert validate_mechanism(mech)[0] == 0
+    _, report = export_verified(mech, tmp_path, {"mjcf", "stl"})
+    assert report.passed, report.failed

@@ -124,7 +124,7 @@ def check_dynamics(model: Any, mech: Mechanism) -> tuple[Check, tuple | None]:
         problems.append(f"the crank turned {np.degrees(final):.2f} deg, not 360")
     if loop > LOOP_RTOL:
         problems.append(f"loop violation {loop:.3g} x shortest link")
-    if path > DYNAMIC_PATH_RTOL:  # false for NaN, reported above
+    if not path <= DYNAMIC_PATH_RTOL:  # NaN too: a path that cannot be compared fails
         problems.append(f"path error {path:.3g} x RMS radius")
     summary = (
         f"crank turned {np.degrees(final):.3f} deg in {run['seconds']:.2f} s; loop violation "

@@ -18,6 +18,8 @@ import numpy as np
 
 CRANK = "crank"
 TOL = 1e-12  # metres: loop-closure residual a solved pose must reach
+ROUNDING = 64 * np.finfo(np.float64).eps  # of the anchors' distance from the world origin:
+# the least residual their rounding allows, which sets the tolerance far from the origin
 MAX_ITER = 50
 MAX_STEP = 2 * np.pi / 400  # radians: largest crank step of a sweep before it is subdivided
 
@@ -100,13 +102,15 @@ def pin_points(model: Any, data: Any) -> dict[int, np.ndarray]:
 
 def _newton(
     model: Any, data: Any, qpos: np.ndarray, free: np.ndarray, tol: float
-) -> tuple[np.ndarray, float, np.ndarray]:
-    """Drive the loop residual to `tol` over the `free` coordinates.
+) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """Drive the loop residual to `tol` (or what rounding allows, far from the origin) over the
+    `free` coordinates.
 
-    Returns the pose, its residual norm and its loop-closure Jacobian.
+    Returns the pose, its residual norm, its loop-closure Jacobian and the tolerance used.
     """
     connects = Connects.of(model, data)
     residual, jacobian = loop_closure(model, data, qpos, connects)
+    tol = max(tol, ROUNDING * float(np.abs(connects.points(data)).max(initial=0.0)))
     error = float(np.linalg.norm(residual))
     scale = float(np.linalg.norm(jacobian[:, free], 2)) ** 2  # typical size of J'J
     damping = 0.0
@@ -129,7 +133,7 @@ def _newton(
         else:  # reject; damp towards gradient descent
             damping = max(10 * damping, 1e-6 * scale)
     loop_closure(model, data, qpos, connects)
-    return qpos, error, jacobian
+    return qpos, error, jacobian, tol
 
 
 def solve_pose(
@@ -155,7 +159,7 @@ def _solve(
     start = np.array(model.qpos0 if guess is None else guess, dtype=np.float64)
     start[crank] = model.qpos0[crank] + angle
     free = np.arange(model.nv) != crank
-    qpos, error, jacobian = _newton(model, data, start, free, tol)
+    qpos, error, jacobian, tol = _newton(model, data, start, free, tol)
     if not error <= tol:
         raise ValueError(
             f"loops do not close at crank angle {angle:.6g} rad (residual {error:.3g} m)"

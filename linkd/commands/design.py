@@ -175,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         constraints=limits,
         path=args.path,
         timed=args.timed,
-        **search_options(args),
+        **{**search_options(args), **({"atlas": False} if single else {})},
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:
