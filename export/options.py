@@ -70,10 +70,14 @@ def resolve_sizes(mech: Mechanism, parts: list[Part], options: ExportOptions | N
         clearance=_given(options.clearance, 0.2 * width),
         density=float(options.density),
     )
-    if not 0 < sizes.hole_diameter < sizes.link_width:
-        raise ValueError("the hole diameter must be positive and smaller than the link width")
-    if min(sizes.thickness, sizes.layer_gap, sizes.clearance, sizes.density) <= 0:
-        raise ValueError("thickness, layer gap, clearance and density must be positive")
+    for name, value in sizes.to_dict().items():
+        if not 0 < value < np.inf:
+            raise ValueError(
+                f"the {name.replace('_', ' ')} must be a positive number, got {value:g}"
+            )
+    if not sizes.hole_diameter < sizes.link_width:
+        raise ValueError(f"the hole diameter ({sizes.hole_diameter:g}) must be smaller than the "
+                         f"link width ({sizes.link_width:g})")  # fmt: skip
     return sizes
 
 

@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     import torch
 
 MIN_POINTS = 8  # distinct points a target curve needs
+LARGEST = 1e15  # a coordinate's magnitude, any units: far past what linkd builds or can place
 COLLINEAR_TOL = 1e-6  # thickness / length below which the points count as one line
 SEPARATORS = (";", ",", "\t", None)  # None: any whitespace; earlier ones win ties
 _EXACT = "donot_use_mm_for_euclid_dist"  # torch.cdist: differences, not a matrix product
@@ -107,6 +108,8 @@ def _parse_row(text: str, sep: str | None) -> tuple[float, float]:
             raise ValueError(f"{_quote(field)} is not a number")
         if not np.isfinite(value):
             raise ValueError(f"{_quote(field)} is not finite (NaN or inf)")
+        if abs(value) > LARGEST:
+            raise ValueError(f"{_quote(field)} is too large (linkd reads up to {LARGEST:g})")
         values.append(value)
     return values[0], values[1]
 

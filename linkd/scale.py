@@ -40,8 +40,9 @@ def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float,
     low, high = limits
     if low <= size <= high:
         return ""
+    given, metric = f"{across(points):.3g} {units}", _metres(size) if size else "0"
     return (
-        f"the {what} is {across(points):.3g} {units} across ({_metres(size) if size else '0'}); "
+        f"the {what} is {given} across{'' if metric == given else f' ({metric})'}; "
         f"linkd builds {what}s from {_metres(low)} to {_metres(high)} across "
         f"(rescale it, or {'set --units' if what == 'curve' else 'change its units'})"
     )

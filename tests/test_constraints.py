@@ -138,7 +138,8 @@ def test_validate_checks_constraints(tmp_path, capsys):
     file = tmp_path / "m.json"
     classic.crank_rocker().save(file)
     assert main(["validate", str(file), "--envelope=-5,-5,10,10", "--max-joints", "5"]) == 0
-    assert "constraints hold" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "constraints hold" in said and "worst transmission angle" in said
     assert main(["validate", str(file), "--envelope", "-1,-1,1,1", "--min-link", "2.5"]) == 1
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 1 and "--envelope" in out[0] and "--min-link" in out[0]

@@ -19,6 +19,7 @@ BAD_CURVES = {
     "line.csv": "".join(f"{k},{2 * k}\n" for k in [*range(0, 12, 2), *range(11, 0, -2)]),
     "same.csv": "3,4\n" * 12,
     "text.csv": "x,y\n" + "".join(f"{k},{k % 3}\n" for k in range(10)) + "a,b\n",
+    "huge.csv": "".join(f"{k}e306,{(k * k) % 7}e305\n" for k in range(-5, 6)),  # no overflow
 }
 
 

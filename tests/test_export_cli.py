@@ -125,13 +125,21 @@ def test_a_failed_run_leaves_no_folders_it_made(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "args",
-    [["--export", "step"], ["--hole-diameter", "1000"], ["--thickness", "-1"]],
+    "args, named",
+    [
+        (["--export", "step"], "step"),
+        (["--hole-diameter", "1000"], "hole diameter (1000)"),
+        (["--thickness", "-1"], "thickness"),
+        (["--link-width", "-1"], "link width"),
+        (["--link-width", "nan"], "link width"),
+        (["--density", "0"], "density"),
+    ],
 )
-def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys, args):
+def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys, args, named):
     out = tmp_path / "out"
     assert main(["export", str(EXAMPLES / "jansen_leg.json"), "--out", str(out), *args]) == 2
-    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and named in err[0]
     assert not out.exists()
 
 

@@ -282,11 +282,14 @@ def test_cli_exit_status(jansen_export: Path, tmp_path: Path, capsys) -> None:
 
 def test_cli_refuses_bad_input(tmp_path: Path, capsys) -> None:
     assert main(["verify", str(tmp_path / "missing")]) == 2
+    (tmp_path / "curve.csv").write_text("0,0\n")
+    assert main(["verify", str(tmp_path / "curve.csv")]) == 2
+    assert "is a file, not an output folder" in capsys.readouterr().err
     folder = hand_built(tmp_path / "out", scaled(crank_rocker()))
     (folder / "mechanism.xml").unlink()
     assert main(["verify", str(folder)]) == 2
     err = capsys.readouterr().err
-    assert "mechanism.xml: missing" in err and len(err.strip().splitlines()) == 2
+    assert "mechanism.xml: missing" in err and len(err.strip().splitlines()) == 1
     (folder / "mechanism.xml").write_text(four_bar_xml(scaled(crank_rocker())))
     (folder / "mechanism.json").write_text("{not json")
     assert main(["verify", str(folder)]) == 2

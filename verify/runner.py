@@ -39,7 +39,8 @@ THRESHOLDS = {
 def load_inputs(out_dir: Path) -> tuple[Mechanism, Path]:
     """mechanism.json (parsed) and the path of mechanism.xml; InputError when either is missing."""
     if not out_dir.is_dir():
-        raise InputError(f"{out_dir}: no such folder")
+        what = "is a file, not an output folder" if out_dir.exists() else "no such folder"
+        raise InputError(f"{out_dir}: {what}")
     json_path, xml_path = out_dir / "mechanism.json", out_dir / "mechanism.xml"
     for path in (json_path, xml_path):
         if not path.is_file():

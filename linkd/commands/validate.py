@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from linkd import constraints
 from linkd.errors import InputError
 from linkd.mechanism import Mechanism
@@ -37,8 +39,13 @@ def run(args: argparse.Namespace) -> int:
             print(f"{args.mechanism}: violates {what}")
             return 1
         held = constraints.summary([m.to_dict() for m in measured], mech.units)
-        print(f"{args.mechanism}: valid ({mech.n_nodes} joints, margin {margin:.4f}); "
+        print(f"{args.mechanism}: valid ({mech.n_nodes} joints, {_worst(margin)}); "
               f"constraints hold: {held}")  # fmt: skip
         return 0
-    print(f"{args.mechanism}: valid ({mech.n_nodes} joints, margin {margin:.4f})")
+    print(f"{args.mechanism}: valid ({mech.n_nodes} joints, {_worst(margin)})")
     return 0
+
+
+def _worst(margin: float) -> str:
+    """The validator's margin (the least squared sine of a transmission angle) in words."""
+    return f"worst transmission angle {np.degrees(np.arcsin(np.sqrt(margin))):.1f} deg"
