@@ -67,6 +67,8 @@ def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, caps
     assert printed.startswith("ellipse-design-2: ") and str(tmp_path) not in printed
     for line in printed.splitlines():
         assert "alternatives/" not in line or "ellipse-design-2/alternatives/" in line
+    listed = [line for line in printed.splitlines() if "alternative 1:" in line]
+    assert len(listed) == 1 and "footprint" in listed[0] and "transmission angle" in listed[0]
     assert not (tmp_path / "ellipse-design-2" / "mechanism.xml").exists()
 
 

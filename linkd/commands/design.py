@@ -206,8 +206,11 @@ def run(args: argparse.Namespace) -> int:
     if "constraints" in r:
         print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
     for alt in outcome.alternatives:
+        width, height = alt["footprint"]
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "
-              f"{alt['chamfer']:.4f}, {out / alt['folder']}/")  # fmt: skip
+              f"{alt['chamfer']:.4f}, footprint {width:.4g} x {height:.4g} {args.units}, worst "
+              f"transmission angle {alt['worst_transmission_deg']:.1f} deg, "
+              f"{out / alt['folder']}/")  # fmt: skip
     t = r["timings"]
     parts = ", ".join(f"{k[:-2]} {v:.1f}" for k, v in t.items() if k != "total_s")
     print(f"  {t['total_s']:.1f} s ({parts})")
