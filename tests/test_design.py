@@ -120,7 +120,7 @@ def test_design_writes_a_verified_export_on_the_users_curve(pool, curve_file, tm
     assert report["verification"]["passed"]
     search = report["search"]  # the pool's designs are all valid; each offers sub-mechanisms
     assert search["proposed"] == search["valid"] < search["placed"]
-    assert {"read_s", "propose_s", "align_s", "refine_s", "verify_s", "total_s"} <= set(
+    assert {"read_s", "propose_s", "align_s", "refine_s", "verify_s", "write_s", "total_s"} <= set(
         report["timings"]
     )
     assert report["design"]["nodes"] == outcome.design.mechanism.n_nodes

@@ -115,18 +115,22 @@ def keep_passed_over(best: PassedOver, folder: Path) -> dict:
     return entry
 
 
-def finish(design: Delivered, target: np.ndarray, formats: set[str], report: dict) -> None:
-    """Write curve.png, animation.html and report.json beside the export, then drop the MuJoCo
-    files if they were only made for the proof."""
+def finish(design: Delivered, target: np.ndarray, formats: set[str]) -> None:
+    """Write curve.png and animation.html beside the export, then drop the MuJoCo files if
+    they were only made for the proof."""
     folder = design.folder
     write_curve_plot(design.mechanism, folder / "curve.png", target=target)
     parts = parts_from_model(folder / "mechanism.xml", design.mechanism)
     write_animation(design.mechanism, folder / "animation.html", target=target, parts=parts)
-    full = {**report, "verification": design.verification.to_dict()}
-    write_atomic(folder / "report.json", json.dumps(full, indent=2) + "\n")
     if "mjcf" not in formats:
         for name in MODEL_FILES:
             (folder / name).unlink(missing_ok=True)
+
+
+def write_report(design: Delivered, report: dict) -> None:
+    """report.json beside the design: `report` and the design's verification."""
+    full = {**report, "verification": design.verification.to_dict()}
+    write_atomic(design.folder / "report.json", json.dumps(full, indent=2) + "\n")
 
 
 def summary(design: Delivered) -> dict:

@@ -43,7 +43,16 @@ from linkd.scale import check_curve_size
 
 from .constrained import screen
 from .drawn import read_target
-from .output import Delivered, PassedOver, deliver, finish, keep_passed_over, skip_counts, summary
+from .output import (
+    Delivered,
+    PassedOver,
+    deliver,
+    finish,
+    keep_passed_over,
+    skip_counts,
+    summary,
+    write_report,
+)
 from .propose import SOURCES, Candidates, Proposer
 from .prune import pruned
 from .refine import RefineSettings, single_thread
@@ -168,9 +177,10 @@ def design(
                 "timings": {},
             }
             with stages.stage("write", "writing plots and report") as note:
-                report["timings"] = _timings(stages, start)
-                finish(found, points, o.formats, report)
+                finish(found, points, o.formats)
                 note(f"{out}/")
+            report["timings"] = _timings(stages, start)
+            write_report(found, report)
             found.folder = Path(out)
     except NoDesign as reason:
         report_search["skipped"] = skip_counts(passed)
@@ -318,7 +328,8 @@ def _alternatives(candidates, order, chosen, frame, points, o, stage, source) ->
         if alt is None:
             continue
         extra = {"constraints": [m.to_dict() for m in measured]} if measured else {}
-        finish(alt, points, o.formats, {"design": summary(alt), **extra})
+        finish(alt, points, o.formats)
+        write_report(alt, {"design": summary(alt), **extra})
         listed.append({"rank": len(listed) + 1, "folder": f"alternatives/{folder.name}",
                        **summary(alt), **extra})  # fmt: skip
         if len(listed) == o.top:
