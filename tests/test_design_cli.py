@@ -122,3 +122,11 @@ def test_the_one_shot_setting_is_the_models_single_sample_alone(tmp_path):
             assert set(report["search"]["sources"]) == {"model"}
         else:
             assert code == 1 and not out.exists()
+
+
+def test_a_budget_too_short_to_refine_says_so(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["design", str(EXAMPLES / "ellipse.csv"), "--time-budget", "9", "--out", str(out)]
+    assert main(args) == 0
+    assert json.loads((out / "report.json").read_text())["search"]["budget_cut_refinement"]
+    assert "the time budget (9 s) cut refinement short" in capsys.readouterr().out

@@ -205,6 +205,9 @@ def run(args: argparse.Namespace) -> int:
               f"{kept}")  # fmt: skip
     if "constraints" in r:
         print(f"  constraints hold: {constraints.summary(r['constraints'], args.units)}")
+    if r["search"].get("budget_cut_refinement"):
+        print(f"  the time budget ({args.time_budget:g} s) cut refinement short: a longer "
+              "--time-budget may trace your curve closer")  # fmt: skip
     for alt in outcome.alternatives:
         width, height = alt["footprint"]
         print(f"  alternative {alt['rank']}: {alt['nodes']} joints, curve error "

@@ -172,6 +172,7 @@ def _row(file: Path, outcome, seconds: float) -> dict:
         "chamfer": figures.get("chamfer"),
         "chamfer_200": figures.get("chamfer_200"),
         "nodes": figures.get("nodes"),
+        "layers": figures.get("layers"),
         "crank_range_deg": figures.get("crank_range_deg"),
         "deviation": None,
         "floor": None,
@@ -195,8 +196,8 @@ def _row(file: Path, outcome, seconds: float) -> dict:
 
 
 def _refused_row(file: Path, reason: str, seconds: float) -> dict:
-    keys = ("path", "chamfer", "chamfer_200", "nodes", "crank_range_deg", "deviation", "floor",
-            "timing_error", "found_by", "passed_over")  # fmt: skip
+    keys = ("path", "chamfer", "chamfer_200", "nodes", "layers", "crank_range_deg", "deviation",
+            "floor", "timing_error", "found_by", "passed_over")  # fmt: skip
     return {"curve": f"{file.parent.name}/{file.stem}", **dict.fromkeys(keys), "valid": False,
             "verified": False, "seconds": seconds, "sources": {}, "skipped": {},
             "timings": {}, "reason": reason}  # fmt: skip
