@@ -32,6 +32,22 @@ def test_the_second_part_runs_in_another_process_and_results_keep_their_order():
 
 
 @needs_fork
+def test_a_child_dies_silently_when_the_parent_ends_it():
+    """The command line turns SIGTERM into a clean-up in the parent (`linkd.cli`); the child,
+    which the parent ends with SIGTERM once its result is in, must not inherit that."""
+    import signal
+
+    from linkd import cli
+
+    before = signal.signal(signal.SIGTERM, cli._terminate)
+    try:
+        handler = run_parts([os.getpid, lambda: signal.getsignal(signal.SIGTERM)])[1]
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert handler == signal.SIG_DFL
+
+
+@needs_fork
 def test_a_part_that_fails_or_dies_in_the_child_is_run_here():
     here = os.getpid()
 

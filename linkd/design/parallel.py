@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import TypeVar
@@ -77,6 +78,7 @@ def _send_result(call: Callable[[], object], send) -> None:
     parent's OpenMP workers were not forked with it, and a parallel region would wait for
     them for ever."""
     torch.set_num_threads(1)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the parent ends it so: at once, silently
     try:
         result = (True, call())
     except BaseException:  # the parent runs the part again, and reports any error
