@@ -21,15 +21,18 @@ ROCKER = classic.crank_rocker()
 
 
 def _delivered(mechanisms, folder, passed=None, **options):
-    """The design delivered from `mechanisms`, ranked in that order, and how many were passed
-    over, by reason (each listed in `passed`)."""
+    """The design delivered from `mechanisms`, ranked in that order (not reordered by their
+    errors on the crank rocker's path, the target here: these tests follow delivery down a
+    ranking), and how many were passed over, by reason (each listed in `passed`)."""
     batch = LinkageBatch.from_mechanisms(mechanisms)
     candidates = Candidates(batch, np.arange(len(mechanisms)) * 0.1)
     passed = [] if passed is None else passed
     points = end_effector_path(ROCKER)[0]
-    found, _, _ = pipeline._deliver(candidates, Similarity(), points,
-                                    DesignOptions(formats=frozenset({"mjcf"}), **options),
-                                    Stages(False), folder, {}, passed, np.inf)  # fmt: skip
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(pipeline, "_simplest_first", lambda order, *_: order)
+        found, _, _ = pipeline._deliver(candidates, Similarity(), points,
+                                        DesignOptions(formats=frozenset({"mjcf"}), **options),
+                                        Stages(False), folder, {}, passed, np.inf)  # fmt: skip
     return found.mechanism, skip_counts(passed)
 
 
@@ -86,3 +89,23 @@ def test_after_half_the_attempts_only_designs_the_rounds_did_not_grow_are_tried(
     for row in _ranked(order, grown, lambda: len(given) >= 2):
         given.append(row)
     assert given == [3, 0, 2]  # then the best not grown (0 was given already)
+
+
+def test_of_designs_that_trace_the_curve_alike_the_simplest_goes_first(monkeypatch):
+    """A six-bar on the curve, ranked first, and the five-joint crank rocker off it: where the
+    difference of their errors is within what counts as alike, the crank rocker is tried
+    first; where it is not, the six-bar."""
+    six = classic.stephenson_six_bar()
+    points = end_effector_path(six)[0]
+    candidates = Candidates(LinkageBatch.from_mechanisms([six, ROCKER]), np.array([0.1, 0.2]))
+    errors = [measure(m, points).chamfer for m in (six, ROCKER)]
+    assert errors[0] < errors[1] and six.n_nodes > ROCKER.n_nodes
+
+    def first(floor: float) -> int:
+        monkeypatch.setattr(pipeline, "SIMPLER_FLOOR", floor)
+        order = pipeline._simplest_first(np.array([0, 1]), candidates, Similarity(), points,
+                                         DesignOptions())  # fmt: skip
+        return int(order[0])
+
+    difference = errors[1] - errors[0]
+    assert first(1.01 * difference) == 1 and first(0.99 * difference) == 0

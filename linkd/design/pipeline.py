@@ -57,7 +57,7 @@ from .propose import SOURCES, Candidates, Proposer
 from .prune import pruned
 from .refine import RefineSettings, single_thread
 from .search import FINE_POINTS, N_POINTS, NoDesign, search
-from .select import to_mechanism, topology_key
+from .select import measure, to_mechanism, topology_key
 from .stages import Stages
 from .stroke import Goal, make_goal
 
@@ -65,6 +65,9 @@ DELIVERY_RESERVE = 8.0  # seconds kept for export, verification and plots
 FAILURES_PER_TOPOLOGY = 2  # designs of one topology tried before the next topology
 QUICK_AFTER = 4  # export refusals after which the next designs are checked quickly first
 QUICK_CHECKS = 200  # quick checks (about 20 ms each) before delivery gives up
+SIMPLER_POOL = 32  # best-ranked designs measured as delivered, the simplest alike first:
+SIMPLER_WITHIN = 0.1  # those this fraction of the best's curve error from it,
+SIMPLER_FLOOR = 0.001  # or this close (normalised, 0.1 % of the curve's RMS radius)
 
 
 @dataclass(frozen=True)
@@ -219,6 +222,7 @@ def _deliver(
         if not feasible.any():
             raise NoDesign(binding(screened, c, o.units))
         order = order[feasible[order]]
+    order = _simplest_first(order, candidates, frame, points, o)
     with stages.stage("verify", "exporting and verifying in MuJoCo") as note:
         found, tried, measured, unmet, failed = None, 0, [], [], {}
         quick, refused = 0, 0  # quick checks, and designs they passed over
@@ -270,6 +274,23 @@ def _deliver(
                                          source)  # fmt: skip
             note(f"{len(alternatives)} alternatives")
     return found, alternatives, measured
+
+
+def _simplest_first(order: np.ndarray, candidates: Candidates, frame, points, o) -> np.ndarray:
+    """`order` (best first) with its first SIMPLER_POOL designs measured against the user's
+    curve as delivery measures them, and those within SIMPLER_WITHIN of the best of them (or
+    SIMPLER_FLOOR, a difference no one sees) put first, fewest joints (pruned) first, then the
+    rest of the pool by that error: where several trace the curve alike, as on a curve a
+    four-bar traces, the one with the fewest parts is delivered."""
+    pool = order[:SIMPLER_POOL]
+    error, joints = np.empty(len(pool)), np.empty(len(pool), int)
+    for k, row in enumerate(map(int, pool)):
+        mech = to_mechanism(pruned(candidates.batch.subset([row])), 0, frame, o.units,
+                            _range(candidates, row))  # fmt: skip
+        error[k], joints[k] = measure(mech, points, o.timed).chamfer, mech.n_nodes
+    alike = error <= max(error.min() * (1 + SIMPLER_WITHIN), error.min() + SIMPLER_FLOOR)
+    first = np.lexsort((error, np.where(alike, joints, 0), ~alike))
+    return np.concatenate([pool[first], order[len(pool) :]])
 
 
 def _ranked(order: np.ndarray, grown: np.ndarray, fall_back: Callable[[], bool]) -> Iterator:
