@@ -10,7 +10,8 @@ Stages, each timed and shown on a terminal:
             each on the target by its best similarity, rank by Chamfer;
 4. refine   move the joints of the best few (one or two per topology) by batched L-BFGS
             through the differentiable kinematics;
-5. verify   from the best, map each design to the user's frame and units, validate, export and
+5. verify   of the best few, measured as delivered, the simplest of those alike first, then
+            the rest: map each design to the user's frame and units, validate, export and
             prove it in MuJoCo until one passes (and as many alternatives as asked for);
 6. write    curve.png, animation.html and report.json; the folder appears all at once.
 
