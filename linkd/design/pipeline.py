@@ -279,16 +279,19 @@ def _deliver(
 
 def _simplest_first(order: np.ndarray, candidates: Candidates, frame, points, o) -> np.ndarray:
     """`order` (best first) with its first SIMPLER_POOL designs measured against the user's
-    curve as delivery measures them, and those within SIMPLER_WITHIN of the best of them (or
-    SIMPLER_FLOOR, a difference no one sees) put first, fewest joints (pruned) first, then the
-    rest of the pool by that error: where several trace the curve alike, as on a curve a
-    four-bar traces, the one with the fewest parts is delivered."""
+    curve as delivery measures them (on a timed curve, by the timing error), and those within
+    SIMPLER_WITHIN of the best of them (or SIMPLER_FLOOR, a difference no one sees) put first,
+    fewest joints (pruned) first, then the rest of the pool by that error: where several trace
+    the curve alike, as on a curve a four-bar traces, the one with the fewest parts is
+    delivered."""
     pool = order[:SIMPLER_POOL]
     error, joints = np.empty(len(pool)), np.empty(len(pool), int)
     for k, row in enumerate(map(int, pool)):
         mech = to_mechanism(pruned(candidates.batch.subset([row])), 0, frame, o.units,
                             _range(candidates, row))  # fmt: skip
-        error[k], joints[k] = measure(mech, points, o.timed).chamfer, mech.n_nodes
+        measures = measure(mech, points, o.timed)
+        error[k] = measures.timing_error if o.timed else measures.chamfer  # what was ranked
+        joints[k] = mech.n_nodes
     alike = error <= max(error.min() * (1 + SIMPLER_WITHIN), error.min() + SIMPLER_FLOOR)
     first = np.lexsort((error, np.where(alike, joints, 0), ~alike))
     return np.concatenate([pool[first], order[len(pool) :]])
