@@ -4,8 +4,10 @@ Exported parts follow a mechanism's own scale (`linkd.export.options`). Plates u
 mesh volume floor are weighed by their surface, and the distance tolerance of its mesh collisions
 follows the parts' gaps (`linkd.export.mjcf`), so generator mechanisms verify down to 0.04 mm
 across, but only half of them at 0.02 mm (dynamics and contacts fail): a tenth of a millimetre
-keeps a margin. Above about a kilometre MuJoCo's solver tolerances no longer close the loops
-(`linkd verify` fails mobility and kinematics at 10 km). A designed mechanism spans its curve
+keeps a margin. The top size is the largest measured with margin: `linkd verify` failed
+mobility at 10 km while its pose solver asked for 1e-12 m; it now asks what the coordinates'
+rounding allows (`linkd.verify.pose`), and a 10 km crank rocker verifies, but the range was
+not widened on one example. A designed mechanism spans its curve
 and usually several times more, so a curve is held to a smaller top size than a mechanism.
 """
 
