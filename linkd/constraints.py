@@ -26,6 +26,7 @@ from linkd.geometry import Similarity
 from linkd.kinematics import trace
 from linkd.mechanism import Mechanism
 from linkd.topology import assembly_plan
+from linkd.validator import transmission_degrees
 
 CHECK_ANGLES = 2048  # crank angles of the first pass of the exact check
 REFINE_ANGLES = 65  # angles across the two sample intervals around each extreme found
@@ -258,7 +259,7 @@ def _measure(batch: LinkageBatch, c: Constraints, motion) -> dict:
         joints = valid.sum(1)
         out["max_joints"] = (joints, (c.max_joints - joints).astype(float))
     if c.min_transmission is not None:
-        worst = _degrees(np.asarray(motion.margin, dtype=np.float64))
+        worst = transmission_degrees(np.asarray(motion.margin, dtype=np.float64))
         out["min_transmission"] = (worst, worst - c.min_transmission)
     return out
 
@@ -268,11 +269,6 @@ def _bounds(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
     low = np.where(mask[..., None], points, np.inf).min(1)
     high = np.where(mask[..., None], points, -np.inf).max(1)
     return np.concatenate([low, high], 1)
-
-
-def _degrees(sin2: np.ndarray) -> np.ndarray:
-    """Transmission angle (folded into 0..90 degrees) from its squared sine."""
-    return np.degrees(np.arcsin(np.sqrt(np.clip(sin2, 0.0, 1.0))))
 
 
 def check(mech: Mechanism, c: Constraints) -> list[Measured]:

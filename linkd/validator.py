@@ -131,6 +131,11 @@ def _trace_chunk(
     return Motion(m.x.numpy(), m.y.numpy(), m.step_margin.double().numpy())
 
 
+def transmission_degrees(margin: Any) -> Any:
+    """The worst transmission angle (folded into 0..90 degrees) of a margin, its squared sine."""
+    return np.degrees(np.arcsin(np.sqrt(np.clip(margin, 0.0, 1.0))))
+
+
 def validate_mechanism(mech: Mechanism, n_angles: int = N_ANGLES) -> tuple[Status, float]:
     """Verdict and margin for one mechanism, in float64."""
     result = validate(LinkageBatch.from_mechanisms([mech]), n_angles, backend="numpy")

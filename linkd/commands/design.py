@@ -158,6 +158,9 @@ def run(args: argparse.Namespace) -> int:
         out = base if args.force else fresh_name(base)
     limits = constraints.from_args(args)
     single = args.candidates == 1 and not args.refine
+    search = search_options(args)
+    if single:  # the model's one sample as it is (CONTRACT §5): no atlas path stands in for it
+        search["atlas"] = False
     options = DesignOptions(
         candidates=args.candidates,
         strategy=args.strategy,
@@ -175,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
         constraints=limits,
         path=args.path,
         timed=args.timed,
-        **{**search_options(args), **({"atlas": False} if single else {})},
+        **search,
     )
     outcome = design(args.curve, out, options, force=args.force)
     if outcome.design is None:

@@ -5,12 +5,10 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from linkd import constraints
 from linkd.errors import InputError
 from linkd.mechanism import Mechanism
-from linkd.validator import N_ANGLES, validate_mechanism
+from linkd.validator import N_ANGLES, transmission_degrees, validate_mechanism
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -47,5 +45,5 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _worst(margin: float) -> str:
-    """The validator's margin (the least squared sine of a transmission angle) in words."""
-    return f"worst transmission angle {np.degrees(np.arcsin(np.sqrt(margin))):.1f} deg"
+    """The validator's margin in words."""
+    return f"worst transmission angle {transmission_degrees(margin):.1f} deg"

@@ -19,6 +19,7 @@ from linkd.kinematics import trace
 from linkd.mechanism import Mechanism
 from linkd.paths import row_angles, stroke_error, timing_error
 from linkd.topology import assembly_plan
+from linkd.validator import transmission_degrees
 
 CHAMFER_POINTS = 2000
 TRACE_ANGLES = 2000  # crank angles a design's path is traced at before resampling
@@ -130,7 +131,7 @@ def measure(mech: Mechanism, target: np.ndarray, timed: bool = False) -> Measure
     path, paths, margin = end_effector_path(mech)
     sweep = paths.reshape(-1, 2)
     extent = sweep.max(0) - sweep.min(0)
-    worst = float(np.degrees(np.arcsin(np.sqrt(np.clip(margin, 0.0, 1.0)))))
+    worst = float(transmission_degrees(margin))
     if mech.crank_range is None:
         errors = curve_error(path, target), curve_error(path, target, 200)
         degrees = None
