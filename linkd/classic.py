@@ -66,6 +66,40 @@ def jansen_leg(crank_angle: float = np.pi / 2) -> Mechanism:
                      (0, 1), 7)  # fmt: skip
 
 
+def jansen_walker(phases: int = 1, mirrored: bool = True) -> Mechanism:
+    """Jansen legs on one crank, as a Strandbeest walker is built: `phases` crank pins equally
+    spaced round the axle (the crank a plate joining them; an odd number, since a pin opposite
+    another lies in line with it and the axle, where no dyad holds it), one leg on each, and with
+    `mirrored` a second leg on each pin, the first's mirror image on a second frame pivot.
+    End effector: the first leg's foot. 8 joints for one leg; 36 for three mirrored pairs."""
+    if phases < 1 or phases % 2 == 0:
+        raise ValueError(f"a walker's crank needs an odd number of pins, got {phases}")
+    angles = np.pi / 2 + 2 * np.pi * np.arange(phases) / phases
+    flip = np.array([-1.0, 1.0])
+    frame = jansen_leg().positions[2]
+    positions = [np.zeros(2), jansen_leg(angles[0]).positions[1], frame]
+    positions += [frame * flip] if mirrored else []
+    links, feet = [(0, 1)], []
+    for k, angle in enumerate(angles):
+        tip = 1
+        if k:  # a further crank pin, fixed on the crank plate
+            tip = len(positions)
+            positions.append(jansen_leg(angle).positions[1])
+            links += [(0, tip), (1, tip)]
+        legs = [(jansen_leg(angle).positions, 2)]
+        if mirrored:  # the mirror image of the leg whose crank pin is this one's mirror
+            legs.append((jansen_leg(np.pi - angle).positions * flip, 3))
+        for joints, pivot in legs:
+            index = {0: 0, 1: tip, 2: pivot}
+            for j in range(3, 8):
+                index[j] = len(positions)
+                positions.append(joints[j])
+            links += [(index[i], index[j]) for i, j in jansen_leg().links if (i, j) != (0, 1)]
+            feet.append(index[7])
+    fixed = [k in (0, 2, 3 if mirrored else 2) for k in range(len(positions))]
+    return Mechanism(positions, fixed, links, (0, 1), feet[0])
+
+
 def _six_bar(coupler_ternary: bool) -> Mechanism:
     """Four-bar O-M-C-G, then a dyad E on a point D and a third ground pivot H, with the
     end effector F on the link D-E. D sits on the rocker (Watt) or on the coupler (Stephenson)."""

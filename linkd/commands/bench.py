@@ -43,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--min-joints", type=int, default=5, help="fewest joints of a mechanism")
     e.add_argument("--max-joints", type=int, default=20, help="most joints of a mechanism")
     e.add_argument("--size", type=float, default=100.0, help="half the box they span, in mm")
+    e.add_argument("--walkers", action="store_true",
+                   help="Jansen walkers instead: one leg, a mirrored pair, and each on a crank "
+                        "of three pins (8 to 36 joints)")  # fmt: skip
     e.set_defaults(run=export)
 
     d = targets.add_parser("design", help="linkd design on curves: validity, error, time")
@@ -174,12 +177,14 @@ def export(args: argparse.Namespace) -> int:
     """Export (MJCF + STL) and verify in MuJoCo `--count` generated mechanisms of `--min-joints`
     to `--max-joints` joints; a mechanism too tangled for flat layers, straight, bent, strapped,
     split, on brackets, on ground stubs or forked, is refused by the export and counted, and
-    named by its number in the run (`generate`'s order) so it can be rebuilt."""
+    named by its number in the run (`generate`'s order) so it can be rebuilt. With `--walkers`,
+    the Jansen walkers of `linkd.classic` instead: mechanisms a user would bring."""
     import tempfile
     from collections import Counter
 
     import numpy as np
 
+    from linkd.classic import jansen_walker
     from linkd.export import TIMESTEP
     from linkd.export.options import resolve_sizes
     from linkd.export.parts import assemble
@@ -191,12 +196,21 @@ def export(args: argparse.Namespace) -> int:
     if not 5 <= args.min_joints <= args.max_joints <= MAX_NODES:
         raise InputError(f"joint counts must satisfy 5 <= --min-joints <= --max-joints <= "
                          f"{MAX_NODES}, got {args.min_joints} and {args.max_joints}")  # fmt: skip
-    settings = GeneratorSettings(min_nodes=args.min_joints, max_nodes=args.max_joints)
-    graphs = generate(args.count, args.seed, settings).graphs
+    if args.walkers:
+        what = "Jansen walkers (linkd.classic.jansen_walker)"
+        mechanisms = {f"{phases} pin(s), {'mirrored' if mirrored else 'one leg each'}":
+                      jansen_walker(phases, mirrored)
+                      for phases in (1, 3) for mirrored in (False, True)}  # fmt: skip
+    else:
+        what = f"random mechanisms of {args.min_joints} to {args.max_joints} joints"
+        what += f" (seed {args.seed})"
+        settings = GeneratorSettings(min_nodes=args.min_joints, max_nodes=args.max_joints)
+        graphs = generate(args.count, args.seed, settings).graphs
+        mechanisms = {f"no. {n}": from_graph(graph, Similarity(scale=args.size))
+                      for n, graph in enumerate(graphs)}  # fmt: skip
     outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
-    refused_ones = []  # which were refused: their numbers in the run (to rebuild them)
-    for number, graph in enumerate(graphs):
-        mech = from_graph(graph, Similarity(scale=args.size))
+    refused_ones = []  # which were refused: their names in the run (to rebuild them)
+    for name, mech in mechanisms.items():
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
         with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
             start = time.perf_counter()
@@ -205,7 +219,7 @@ def export(args: argparse.Namespace) -> int:
             except ValueError:
                 outcome["refused (no flat layering)"] += 1
                 refusals.append(time.perf_counter() - start)
-                refused_ones.append(f"no. {number} ({len(mech.positions)} joints)")
+                refused_ones.append(f"{name} ({len(mech.positions)} joints)")
                 continue
             seconds.append(time.perf_counter() - start)
         layers.append(result.layers)
@@ -235,8 +249,7 @@ def export(args: argparse.Namespace) -> int:
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
-    print(f"export: {len(graphs)} random mechanisms of {args.min_joints} to {args.max_joints} "
-          f"joints (seed {args.seed})")  # fmt: skip
+    print(f"export: {len(mechanisms)} {what}")
     for name in ("verified", "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
