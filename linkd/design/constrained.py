@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from linkd.batch import LinkageBatch
-from linkd.constraints import Constraints, measure_batch
+from linkd.constraints import ROUNDING, Constraints, measure_batch
 from linkd.curves import chamfer_batch
 from linkd.geometry import Similarity
 from linkd.validator import validate
@@ -172,8 +172,10 @@ def screen(batch: LinkageBatch, frame: Similarity, c: Constraints) -> tuple[np.n
     """Which candidates (in the normalised frame) meet every constraint `c` (in the user's frame)
     at sampled crank angles once mapped by `frame`, and each constraint's (values, margins)."""
     positions = frame.apply(batch.positions)
-    if c.motor_at is not None:
-        positions[:, 0] = c.motor_at
+    if c.motor_at is not None:  # pinned, up to the frame change's rounding: exactly there
+        extent = np.ptp(positions, axis=1).max(1)
+        near = np.linalg.norm(positions[:, 0] - c.motor_at, axis=1) <= ROUNDING * extent
+        positions[near, 0] = c.motor_at
     user = LinkageBatch(positions, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
     measured = measure_batch(user, c)
     feasible = np.ones(len(batch), bool)

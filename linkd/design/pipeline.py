@@ -319,11 +319,14 @@ def _checked(candidate: LinkageBatch, frame, o: DesignOptions, crank_range=None)
     c = o.constraints
     if not c:
         return mech, []
-    if c.motor_at is not None:  # exactly there, not up to the rounding of the frame change
+    measured = check(mech, c)
+    if c.motor_at is not None and all(m.holds for m in measured):
+        # Exactly there: the pivot is on it up to the rounding of the frame change. One that
+        # is not (a design the search could not pin) is not moved: that would be another one.
         positions = mech.positions.copy()
         positions[mech.motor[0]] = c.motor_at
         mech = mech.replace(positions=positions)
-    measured = check(mech, c)
+        measured = check(mech, c)
     return (mech if all(m.holds for m in measured) else None), measured
 
 

@@ -121,6 +121,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     both: a wide search settles in different basins, and now and then in worse ones, so a
     longer budget could otherwise deliver a worse design than the default."""
     stroke = not goal.closed or goal.timed
+    if stroke and inner.motor_at is not None:  # placed and refined with a free pivot
+        raise NoDesign("no design puts its crank pivot on the motor point: linkd pins the "
+                       "pivot on closed paths only, not on open or timed ones")  # fmt: skip
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
