@@ -151,6 +151,24 @@ def test_design_is_deterministic_for_a_seed(pool, curve_file, tmp_path):
     assert texts[0] == texts[1]
 
 
+def test_rounds_and_polish_the_deadline_cuts_are_reported(pool, curve_file, tmp_path, monkeypatch):
+    """Every refinement runs in full here, but the clock says the deadline has passed before
+    the later rounds and the polish: the run then depends on the machine's speed, and says so."""
+    import types
+
+    from linkd.design import search
+
+    out = []
+    for name, clock in (("on time", lambda: 0.0), ("late", lambda: float("inf"))):
+        monkeypatch.setattr(search, "time", types.SimpleNamespace(monotonic=clock))
+        outcome = design(curve_file, tmp_path / name, options(rounds=3, atlas=False),
+                         proposer=pool_proposer(pool), show=False)  # fmt: skip
+        out.append(outcome.report["search"])
+    assert out[0]["rounds_run"] == 3 and not out[0]["budget_cut_refinement"]
+    assert out[1]["rounds_run"] == 1 and out[1]["budget_cut_refinement"]
+    assert out[1]["refine_iterations"] == QUICK.iterations  # the first refinement was whole
+
+
 def test_design_does_not_depend_on_a_second_process(pool, curve_file, tmp_path, monkeypatch):
     """Proposal and refinement run in two parts at once where they can, one after the other
     where they cannot (`linkd.design.parallel`): the same design either way."""

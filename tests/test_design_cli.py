@@ -81,6 +81,8 @@ def test_random_proposer_designs_blind_to_the_curve(tmp_path, monkeypatch):
     assert main([*args, "--out", "a"]) == 0
     report = json.loads((tmp_path / "a" / "report.json").read_text())
     assert report["search"]["proposer"] == "random" and "model" not in report["search"]
+    assert "random" in report["search"]["sources"] and "model" not in report["search"]["sources"]
+    assert report["search"]["found_by"] in ("random", "atlas", "round 2")
     assert report["verification"]["passed"]
     propose = random_proposer()
     curves = np.zeros((2, 200, 2), np.float32)

@@ -278,9 +278,10 @@ def stages(rows: list[dict]) -> dict:
             best = min(best, np.inf if value is None else value)
             columns.setdefault(name, []).append(best)
 
-        reached("model, placed", sources.get("model", {}).get("best_placed"))
+        proposer = "random" if "random" in sources else "model"
+        reached(f"{proposer}, placed", sources.get(proposer, {}).get("best_placed"))
         reached("+ atlas, placed", sources.get("atlas", {}).get("best_placed"))
-        refined = [sources.get(name, {}).get("best_refined") for name in ("model", "atlas")]
+        refined = [sources.get(name, {}).get("best_refined") for name in (proposer, "atlas")]
         reached("+ refinement", min((v for v in refined if v is not None), default=None))
         reached("+ later rounds", sources.get("round 2", {}).get("best_refined"))
         reached("+ polish", (row.get("polish") or {}).get("after"))

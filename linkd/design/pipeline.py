@@ -54,7 +54,7 @@ from .output import (
     summary,
     write_report,
 )
-from .propose import SOURCES, Candidates, Proposer
+from .propose import SOURCES, Candidates, Proposer, source_name
 from .prune import pruned
 from .refine import RefineSettings, single_thread
 from .search import FINE_POINTS, N_POINTS, NoDesign, search
@@ -253,7 +253,7 @@ def _deliver(
             if mech is None:  # within the screening's sampling, but not exactly
                 unmet.append(next(m for m in measured if not m.holds))
             else:
-                origin = SOURCES[candidates.source[row]]
+                origin = source_name(candidates.source[row], o.proposer)
                 found = deliver(mech, points, stage, o.formats, {**source, "found_by": origin},
                                 o.timed, passed, time.monotonic() < ends)  # fmt: skip
                 if found:

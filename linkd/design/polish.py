@@ -26,7 +26,8 @@ def polish(candidates: Candidates, count: int, per_topology: int, refine_finely:
     corners where the end effector moves fast, so refinement can settle where the polyline
     fits but the path does not; at finer angles it moves on, and a design ranked lower at the
     coarse angles may end first. A design that misses the hard limits at the finer angles
-    keeps its place and error. Returns what it did, for the report."""
+    keeps its place and error. Returns what it did, for the report (`iterations`: those the
+    first designs ran, fewer than asked where the deadline cut them)."""
     order = np.argsort(candidates.chamfer, kind="stable")
     order = order[np.isfinite(candidates.chamfer[order])]
     if until is not None and len(order):
@@ -36,15 +37,16 @@ def polish(candidates: Candidates, count: int, per_topology: int, refine_finely:
                            per_topology)  # fmt: skip
     if not ranking:
         return {"designs": 0}
-    before, done = float(candidates.chamfer[ranking[0]]), []
+    before, done, first = float(candidates.chamfer[ranking[0]]), [], None
     for start in range(0, len(ranking), count):
         rows = np.array(ranking[start : start + count], int)
         errors = candidates.chamfer[rows].copy()
-        refine_finely(candidates, rows, progress)
+        iterations = refine_finely(candidates, rows, progress)
+        first = iterations if first is None else first
         lost = ~np.isfinite(candidates.chamfer[rows])
         candidates.chamfer[rows[lost]] = errors[lost]  # positions are kept where it fails
         done.extend(rows)
         if until is None or time.monotonic() >= until:
             break
     return {"designs": len(done), "before": before,
-            "after": float(candidates.chamfer[done].min())}  # fmt: skip
+            "after": float(candidates.chamfer[done].min()), "iterations": first}  # fmt: skip

@@ -61,6 +61,12 @@ def merged(first: Candidates, second: Candidates) -> Candidates:
 SOURCES = ("model", "atlas", "round 2")  # the proposer, the atlas, the search around the best
 
 
+def source_name(source: int, proposer: str) -> str:
+    """The name of a candidate's source (an index into SOURCES) in reports: the proposer's own
+    ("model" for LinkD, "random" for the generator), "atlas" or "round 2"."""
+    return proposer if source == 0 else SOURCES[source]
+
+
 def joined(batches: list[LinkageBatch]) -> LinkageBatch:
     """One batch of the linkages of several (all padded to the same number of joints)."""
     fields = ("positions", "fixed", "valid", "adjacency", "end_effector")

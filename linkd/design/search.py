@@ -39,6 +39,7 @@ from .propose import (
     place,
     propose,
     random_proposer,
+    source_name,
     sub_mechanisms,
 )
 from .refine import RefineSettings, refine
@@ -135,7 +136,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         # shorter, less the polish's share of the difference.
         end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
         short = replace(o, time_budget=BUDGET_STEP)
-        default_search = _explore(goal, target, inner, short, graphs, stages, end, {})
+        first: dict = {}
+        default_search = _explore(goal, target, inner, short, graphs, stages, end, first)
+        report["budget_cut_refinement"] = first.get("budget_cut_refinement", False)
         report["default_search"] = {"best": float(np.min(default_search[0].chamfer))}
         # Polished as a default run polishes: the design it would deliver is then in hand.
         _polish_stage(default_search[0], goal, inner, short, deadline, stages, None)
@@ -147,10 +150,15 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         candidates.ranges = None
     report["refined"] = int((candidates.refined & np.isfinite(candidates.chamfer)).sum())
     used = [k for k in range(len(SOURCES)) if (candidates.source == k).any()]
-    report["sources"] = {SOURCES[k]: _contribution(candidates, k, placed) for k in used}
+    report["sources"] = {source_name(k, o.proposer): _contribution(candidates, k, placed)
+                         for k in used}  # fmt: skip
     if polishing and time.monotonic() < deadline:
         until = deadline if longer else None
         report["polish"] = _polish_stage(candidates, goal, inner, o, deadline, stages, until)
+        if report["polish"]["cut"]:
+            report["budget_cut_refinement"] = True
+    elif polishing:  # no time was left for it
+        report["budget_cut_refinement"] = True
     return candidates
 
 
@@ -167,6 +175,7 @@ def _polish_stage(candidates: Candidates, goal: Goal, inner: Constraints, o: Des
         refine_finely = _refiner(goal, fine, False, finely, inner, deadline)
         done = polish(candidates, count, o.per_topology, refine_finely,
                       _progress(stages, count, finely), until)  # fmt: skip
+        done["cut"] = done.pop("iterations", finely.iterations) < finely.iterations
         if done["designs"]:
             note(f"{done['designs']} designs, best Chamfer {done['before']:.4f} to "
                  f"{done['after']:.4f}")  # fmt: skip
@@ -248,7 +257,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                                          refine_count, o.per_topology), int)  # fmt: skip
             iterations = refine_rows(candidates, rows, _progress(stages, len(rows), settings))
             report["refine_iterations"] = iterations
-            report["budget_cut_refinement"] = iterations < settings.iterations
+            cut = report.get("budget_cut_refinement", False)  # a default search's before
+            report["budget_cut_refinement"] = cut or iterations < settings.iterations
             note(f"{len(rows)} designs, {iterations} iterations, "
                  f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
         # Copies of refined designs start near a good fit: one variant, the lighter ordered term,
@@ -264,7 +274,10 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
         best, stalled = np.min(candidates.chamfer), 0
         report["rounds_run"] = 1
         for _ in range(rounds - 1):
-            if time.monotonic() > rounds_end or stalled == STALL_ROUNDS:
+            if stalled == STALL_ROUNDS:
+                break
+            if time.monotonic() > rounds_end:  # the rounds left were the time budget's to cut
+                report["budget_cut_refinement"] = True
                 break
             report["rounds_run"] += 1
             with stages.stage("round", "growing the best designs by a joint") as note:
@@ -285,6 +298,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 )
                 progress = _progress(stages, len(rows), nearby_settings)
                 done = refine_nearby(candidates, rows, progress)
+                if done < nearby_settings.iterations:
+                    report["budget_cut_refinement"] = True
                 note(f"{len(rows)} designs, {done} iterations, "
                      f"best Chamfer {np.min(candidates.chamfer):.4f}")  # fmt: skip
             if budget_steps(o.time_budget) > 1:  # the default's rounds are few: all run
