@@ -44,6 +44,39 @@ def test_every_default_is_shown_and_every_command_says_what_it_does(capsys):
                 assert f"default: {default}" in text or "default" in action.help, (name, action)
 
 
+def test_every_option_of_every_command_and_benchmark_has_help(capsys):
+    commands = {(name,): command for name, command in _commands().items()}
+    (targets,) = [a for a in commands[("bench",)]._actions
+                  if isinstance(a, argparse._SubParsersAction)]  # fmt: skip
+    commands |= {("bench", name): target for name, target in targets.choices.items()}
+    for words, command in commands.items():
+        text = " ".join(_help(list(words), capsys).split())
+        for action in command._actions:
+            if action.option_strings and action.help != argparse.SUPPRESS:
+                assert action.help, (words, action.option_strings)
+                default = action.default
+                if default not in (None, argparse.SUPPRESS) and not isinstance(default, bool):
+                    assert f"default: {default}" in text or "default" in action.help
+
+
+def test_a_closed_pipe_ends_quietly():
+    """`linkd ... | head`: the reader went away; no traceback, the usual broken-pipe status."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    mechanism = Path(__file__).parents[1] / "assets" / "examples" / "jansen_leg.json"
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        run = subprocess.run([sys.executable, "-m", "linkd.cli", "validate", str(mechanism)],
+                             stdout=write, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    finally:
+        os.close(write)
+    assert run.returncode == 141 and run.stderr == "", run.stderr
+
+
 def test_help_examples_are_valid_command_lines():
     examples = []
     for command in _commands().values():

@@ -28,18 +28,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     k.add_argument("--workers", type=int, default=os.cpu_count() or 1,
                    help="processes, each validating its share of the batch")  # fmt: skip
     k.add_argument("--threads", type=int, default=1, help="torch threads per process")
-    k.add_argument("--seed", type=int, default=0)
+    k.add_argument("--seed", type=int, default=0, help="seed of the random mechanisms")
     k.set_defaults(run=kinematics)
 
     g = targets.add_parser("generator", help="valid curated random mechanisms/s")
     g.add_argument("--count", type=int, default=20_000, help="mechanisms to generate")
     g.add_argument("--workers", type=int, default=os.cpu_count() or 1, help="processes")
-    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--seed", type=int, default=0, help="seed of the generator")
     g.set_defaults(run=generator)
 
     e = targets.add_parser("export", help="export and verify random mechanisms no test has seen")
     e.add_argument("--count", type=int, default=100, help="random mechanisms")
-    e.add_argument("--seed", type=int, default=2026)
+    e.add_argument("--seed", type=int, default=2026, help="seed of the generator")
     e.add_argument("--min-joints", type=int, default=5, help="fewest joints of a mechanism")
     e.add_argument("--max-joints", type=int, default=20, help="most joints of a mechanism")
     e.add_argument("--size", type=float, default=100.0, help="half the box they span, in mm")
@@ -53,10 +53,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--dataset", help="also the test split of this data set folder")
     d.add_argument("--limit", type=int, help="at most this many curves")
     d.add_argument("--candidates", type=int, default=512, help="designs sampled per curve")
-    d.add_argument("--strategy", default="node", choices=("node", "graph", "oneshot"))
-    d.add_argument("--no-refine", dest="refine", action="store_false")
+    d.add_argument("--strategy", default="node", choices=("node", "graph", "oneshot"),
+                   help="LinkD's sampling: node- or graph-level retry, or one shot")  # fmt: skip
+    d.add_argument("--no-refine", dest="refine", action="store_false",
+                   help="place the designs on the curve without refining them")  # fmt: skip
     d.add_argument("--time-budget", type=float, default=30.0, help="seconds per curve")
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--seed", type=int, default=0, help="seed of the sampling and search")
     d.add_argument("--model", help="LinkD checkpoint (default: the shipped one)")
     d.add_argument("--proposer", default="model", choices=("model", "random"),
                    help="candidates from LinkD or from the curve-blind generator")  # fmt: skip

@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="decode a joint's links as a dyad's: a moving joint's two likeliest, "
                         "a ground joint's none (default: the model's; --no-dyadic: each link "
                         "on its own)")  # fmt: skip
-    p.add_argument("--retries", type=int, default=25)
+    p.add_argument("--retries", type=int, default=25,
+                   help="tries per node (node level) or per graph (graph level)")  # fmt: skip
     p.add_argument("--steps", type=int, help="DDIM steps (default: the model's)")
     p.add_argument(
         "--speed",

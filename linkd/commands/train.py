@@ -34,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="weight of the joint-position loss against validity, type and links (default: 2)",
     )
     p.add_argument("--init", help="start from this checkpoint's weights (e.g. a cpu run's)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial weights and batches")
     p.add_argument("--device", help="cpu or cuda (default: the preset's)")
     p.add_argument(
         "--threads",
