@@ -32,7 +32,7 @@ CHECK_ANGLES = 2048  # crank angles of the first pass of the exact check
 REFINE_ANGLES = 65  # angles across the two sample intervals around each extreme found
 SCREEN_ANGLES = 360  # crank angles of the batched screening
 ROUNDING = 1e-9  # relative allowance for float rounding, times the mechanism's extent
-MIN_JOINTS = 4  # the smallest linkage whose end effector is not on the crank
+MIN_JOINTS = 3  # the smallest linkage linkd designs: a point on the crank, tracing a circle
 
 
 @dataclass(frozen=True)
@@ -153,8 +153,9 @@ def from_args(args: argparse.Namespace) -> Constraints:
         if not re.fullmatch(r"\s*\+?\d+\s*", joints):
             raise InputError(f"--max-joints: expected a whole number, got {joints!r}")
         if int(joints) < MIN_JOINTS:
-            raise InputError(f"--max-joints must be at least {MIN_JOINTS} (the smallest "
-                             f"linkage with a coupler), got {int(joints)}")  # fmt: skip
+            smallest = "the smallest linkage linkd designs: a point on the crank"
+            raise InputError(f"--max-joints must be at least {MIN_JOINTS} ({smallest}), "
+                             f"got {int(joints)}")  # fmt: skip
     angle = _numbers("min_transmission", text["min_transmission"], 1)
     if angle is not None and not 0 <= angle[0] < 90:
         raise InputError(

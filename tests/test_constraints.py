@@ -54,7 +54,7 @@ def test_options_parse_in_the_curves_units():
         (dict(motor_at="a,b"), "--motor-at"),
         (dict(motor_at="1,2,3"), "--motor-at"),
         (dict(max_joints="7.5"), "--max-joints"),
-        (dict(max_joints="3"), "--max-joints"),
+        (dict(max_joints="2"), "--max-joints"),
         (dict(min_transmission="95"), "--min-transmission"),
         (dict(motor_at="20,0", ground_box="-10,-10,10,10"), "outside the ground box"),
         (dict(motor_at="0,0", envelope="1,1,2,2"), "outside the envelope"),
