@@ -77,8 +77,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "OUT/alternatives/")  # fmt: skip
     p.add_argument("--time-budget", type=float, default=30.0, metavar="SECONDS",
                    help="for the whole run: sampling and refinement stop early to keep it; "
-                   "export and verification always finish. A longer one runs the 30 s search, "
-                   "then a wider one")  # fmt: skip
+                   "export and verification always finish, and 8 s are kept for them, so a "
+                   "budget under about 15 s leaves little or no refinement. A longer one runs "
+                   "the 30 s search, then a wider one")  # fmt: skip
     p.add_argument("--model", metavar="CHECKPOINT",
                    help="LinkD checkpoint (default: the one shipped with linkd)")  # fmt: skip
     p.add_argument("--proposer", default="model",
