@@ -19,6 +19,8 @@ import pytest
 
 from linkd.classic import crank_rocker, non_grashof_four_bar
 from linkd.cli import main
+from linkd.export.options import resolve_sizes
+from linkd.export.parts import assemble
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from linkd.verify.analytic import joint_paths
 from linkd.verify.pose import solve_pose, solve_sweep
@@ -215,6 +217,37 @@ def test_collision_hidden_by_the_model_is_caught(jansen_export: Path, tmp_path: 
     assert report.failed == ["collisions"]
     collisions = next(c for c in report.checks if c.name == "collisions")
     assert "excluded from contact but not a pin in its hole: link_1_3" in collisions.detail
+
+
+@pytest.mark.parametrize("edit", ["moved", "scaled", "boxes moved"])
+def test_a_plate_edited_off_its_pins_fails(jansen_export: Path, tmp_path: Path, edit) -> None:
+    """The joints still move as designed, but the link no longer reaches them."""
+    if edit == "boxes moved":  # the model without meshes: the link's bar and bosses
+        from linkd.export import export_mechanism
+
+        folder = tmp_path / "boxes"
+        folder.mkdir()
+        export_mechanism(Mechanism.load(EXAMPLES / "jansen_leg.json"), folder, {"mjcf"})
+    else:
+        folder = planted(jansen_export, tmp_path)
+    mech = Mechanism.load(folder / "mechanism.json")
+    width = resolve_sizes(mech, assemble(mech).parts, None).link_width * 1e-3  # metres
+
+    def move(root: ET.Element) -> None:
+        for geom in root.iter("geom"):
+            name = geom.get("name") or ""
+            if edit == "scaled" and name == "link_1_4":
+                mesh = next(m for m in root.iter("mesh") if m.get("name") == geom.get("mesh"))
+                mesh.set("scale", "0.3 0.3 1")
+            elif name == "link_1_4" or name.startswith("link_1_4_"):
+                x, y, z = map(float, geom.get("pos").split())
+                geom.set("pos", f"{x + 0.4 * width} {y} {z}")
+
+    edit_model(folder, move)
+    report = verify_output(folder)
+    assert "load" in report.failed
+    load = next(c for c in report.checks if c.name == "load")
+    assert "part link_1_4 does not hold its pin" in load.detail
 
 
 def test_soft_loop_closures_fail_the_dynamic_run(jansen_export: Path, tmp_path: Path) -> None:

@@ -5,7 +5,8 @@ Each check returns a `Check` with one headline figure and the threshold it is he
 - load: mechanism.xml compiles with no MuJoCo warning; the contract's names are present (hinge
   `crank`, position actuator `motor` on it with unit gear and no control limits, site
   `end_effector`); every joint is a hinge about z; every active equality is a `connect`;
-  contacts and constraints are enabled.
+  contacts and constraints are enabled; every moving part's own geoms hold its pins
+  (`holding`).
 - mobility: at N_ANGLES crank angles (the loops solved with the crank held, `pose.solve_sweep`),
   the loop-closure Jacobian J (3 rows per connect, one column per dof) has nv - rank(J) = 1 and
   rank(J without the crank column) = nv - 1 (crank held, the rest is locked). A singular value
@@ -40,6 +41,7 @@ import numpy as np
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
 from .analytic import joint_paths
+from .holding import unheld_pins
 from .pose import CRANK, Connects, loop_closure
 
 N_ANGLES = 200  # crank angles 2*pi*k/N of the kinematic checks
@@ -107,6 +109,7 @@ def check_load(xml_path: str) -> tuple[Check, Any]:
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
     problems = [f"MuJoCo warning: {m}" for m in messages] + contract_problems(model, data)
+    problems += unheld_pins(model, data)
     detail = "; ".join(problems) if problems else f"{model.nbody - 1} bodies, nv {model.nv}"
     return verdict("load", not problems, float(len(problems)), threshold, detail), model
 
