@@ -165,6 +165,7 @@ def test_rounds_and_polish_the_deadline_cuts_are_reported(pool, curve_file, tmp_
                          proposer=pool_proposer(pool), show=False)  # fmt: skip
         out.append(outcome.report["search"])
     assert out[0]["rounds_run"] == 3 and not out[0]["budget_cut_refinement"]
+    assert sum(source["refined"] for source in out[0]["sources"].values()) == out[0]["refined"]
     assert out[1]["rounds_run"] == 1 and out[1]["budget_cut_refinement"]
     assert out[1]["refine_iterations"] == QUICK.iterations  # the first refinement was whole
 
