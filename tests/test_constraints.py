@@ -247,21 +247,6 @@ def test_bench_setup_is_consistent_around_a_curve():
     assert c.ground_box.y1 < curve[:, 1].min() and (c.envelope.margin(curve) > 0).all()
 
 
-def test_a_motor_point_on_an_open_path_is_refused_at_once_not_moved_onto(small, tmp_path):
-    """The search places and refines strokes with a free pivot: moving the pivot afterwards
-    would deliver another mechanism, so the design ends at once, naming the motor point."""
-    mech, pool, _ = small
-    stroke = tmp_path / "stroke.csv"
-    write_curve(stroke, resample(end_effector_path(mech, 1000)[0][:400], 60))
-    limits = Constraints(motor_at=tuple(mech.positions[0]))
-    opts = DesignOptions(candidates=12, formats=frozenset({"mjcf"}), constraints=limits,
-                         path="open")  # fmt: skip
-    outcome = design(stroke, tmp_path / "out", opts, proposer=lambda *a: pool[:12], show=False)
-    assert outcome.design is None
-    assert outcome.report["reason"].startswith("no design puts its crank pivot on the motor point")
-    assert not (tmp_path / "out").exists()
-
-
 def test_the_screen_leaves_a_pivot_off_the_motor_point_where_it_is():
     mech = classic.crank_rocker()
     batch = LinkageBatch.from_mechanisms([mech, mech.replace(positions=mech.positions + 0.5)])

@@ -13,6 +13,7 @@ from test_design import pool_proposer
 
 from linkd import classic
 from linkd.cli import main
+from linkd.constraints import Constraints
 from linkd.curves import resample, write_curve
 from linkd.design.bench import run_bench
 from linkd.design.pipeline import DesignOptions, design
@@ -116,6 +117,19 @@ def test_a_known_partial_stroke_is_recovered_with_its_range(pool, tmp_path):
     assert figures["timing_error"] < 0.005 and figures["chamfer"] < 0.01
     mech = Mechanism.load(out / "mechanism.json")
     assert mech.crank_range == pytest.approx((a, b))
+
+
+def test_a_motor_point_on_a_stroke_pins_the_pivot_there(pool, tmp_path):
+    """A stroke's designs are pinned as a closed loop's are: placed about the motor point,
+    refined with the pivot held, delivered with it exactly there."""
+    file = stroke_file(pool, tmp_path, 1.0, 3.5, 80, "stroke.csv")
+    motor = tuple(USER.apply(from_graph(pool[0]).positions[:1])[0])
+    opts = options(timed=True, constraints=Constraints(motor_at=motor))
+    outcome = design(file, tmp_path / "pinned", opts, proposer=pool_proposer(pool), show=False)
+    assert outcome.design is not None
+    mech = Mechanism.load(tmp_path / "pinned" / "mechanism.json")
+    assert tuple(mech.positions[mech.motor[0]]) == motor  # exactly
+    assert outcome.report["design"]["timing_error"] < 0.005
 
 
 def test_timing_of_a_known_closed_path_is_recovered(pool, tmp_path):

@@ -5,7 +5,8 @@ Everything here works in the target's normalised frame, on constraints mapped in
 - `prune`: candidates with more joints than allowed never reach alignment;
 - `pin`: with a motor point, each placed candidate is moved by the similarity that best fits its
   path to the target among those that map its crank pivot exactly onto the motor point (the
-  translation follows from rotation and scale, which stay free, fitted by ICP about the point);
+  translation follows from rotation and scale, which stay free, fitted by ICP about the point;
+  `pin_stroke` the same for an open or timed path, over each candidate's crank range);
 - `rank`: candidates that nearly meet the constraints already go first, so they are refined;
 - `Barriers`: refinement terms keeping fixed joints in the ground box and every joint in the
   envelope over the cycle (soft quadratic penalties, with hard limits on the kept iterate), and
@@ -28,6 +29,7 @@ from linkd.validator import validate
 
 from .propose import Candidates
 from .refine import RefineSettings, resample_closed
+from .stroke import Goal, stroke_scores, strokes
 
 # Inner margins (normalised units, the target's RMS radius is 1) for the ground box and the
 # envelope: the iterate refinement keeps must stay HARD inside; the penalty pushes towards SOFT.
@@ -71,6 +73,33 @@ def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candid
     score = np.nan_to_num(chamfer.numpy(), nan=np.inf)
     order = np.argsort(score, kind="stable")
     return Candidates(placed.subset(order), score[order], candidates.source[order])
+
+
+def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candidates:
+    """`pin` for placed strokes: the scale and rotation about the motor point that best map
+    each end effector's path over its crank range onto the goal, point to point in order (least
+    squares, in closed form), then on a path not timed by ICP; sorted by the new score."""
+    batch = candidates.batch
+    if len(batch) == 0:
+        return candidates
+    paths, _ = strokes(batch, candidates.ranges, goal, PIN_POINTS)
+    pivot = torch.as_tensor(batch.positions[:, 0])
+    goal_points = torch.as_tensor(goal.samples(PIN_POINTS)) - torch.as_tensor(motor)
+    u = torch.view_as_complex((paths - pivot[:, None]).contiguous())
+    v = torch.view_as_complex(goal_points.contiguous())
+    z = (u.conj() * v).sum(1) / (u.abs() ** 2).sum(1)
+    factor = torch.nan_to_num(torch.view_as_real(z)).float()
+    if not goal.timed:  # the path's points need not be reached in order: nearest points
+        for _ in range(PIN_STEPS):
+            factor = _fit_about_origin(torch.view_as_real(u).float(), goal_points.float(), factor)
+    rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
+    moved = _turn(rel, factor.double()).numpy() + np.asarray(motor)
+    moved[:, 0] = motor  # exactly
+    placed = LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
+    score = stroke_scores(placed, candidates.ranges, goal)
+    order = np.argsort(score, kind="stable")
+    return Candidates(placed.subset(order), score[order], candidates.source[order],
+                      ranges=candidates.ranges[order])  # fmt: skip
 
 
 def _turn(points: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:

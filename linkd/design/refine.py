@@ -194,7 +194,10 @@ def _refine(
                      report(done))  # fmt: skip
     # Each candidate's better variant.
     pick = best_chamfer.reshape(len(batch), copies).argmin(1) + copies * np.arange(len(batch))
-    return RefineResult(best[pick], best_chamfer[pick], done + more)
+    positions = best[pick]
+    if pinned:  # where it was given, not its single-precision rounding
+        positions[:, 0] = batch.positions[:, 0]
+    return RefineResult(positions, best_chamfer[pick], done + more)
 
 
 @dataclass

@@ -20,13 +20,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkd.batch import LinkageBatch
+from linkd.constraints import Constraints
 from linkd.export import buildable as can_build
 from linkd.geometry import Similarity
 from linkd.validator import validate
 
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
-from .constrained import pin, rank, tightened
+from .constrained import pin, pin_stroke, rank, tightened
 from .parallel import PARTS, run_parts, split
 from .polish import polish
 from .propose import (
@@ -50,8 +51,6 @@ from .stroke import Goal, place_stroke
 from .stroke_refine import refine_stroke
 
 if TYPE_CHECKING:
-    from linkd.constraints import Constraints
-
     from .pipeline import DesignOptions
 
 BUDGET_STEP = 30.0  # seconds: the default budget, the unit a longer one widens the search by
@@ -122,9 +121,6 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     both: a wide search settles in different basins, and now and then in worse ones, so a
     longer budget could otherwise deliver a worse design than the default."""
     stroke = not goal.closed or goal.timed
-    if stroke and inner.motor_at is not None:  # placed and refined with a free pivot
-        raise NoDesign("no design puts its crank pivot on the motor point: linkd pins the "
-                       "pivot on closed paths only, not on open or timed ones")  # fmt: skip
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
@@ -235,8 +231,10 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
             candidates = place_stroke(batch, goal)
         else:
             candidates = place(batch, target, source)
-        if inner.motor_at is not None and not stroke:
-            candidates = pin(candidates, target, np.array(inner.motor_at))
+        if inner.motor_at is not None:
+            motor = np.array(inner.motor_at)
+            candidates = (pin_stroke(candidates, goal, motor) if stroke
+                          else pin(candidates, target, motor))  # fmt: skip
         if inner:
             candidates = rank(candidates, inner)
         report["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
@@ -287,6 +285,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                     note("no design that can be built to search around")
                     break
                 found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
+                if inner.motor_at is not None:  # placed anew: pinned anew
+                    found = pin(found, target, np.array(inner.motor_at))
                 if inner:
                     found = rank(found, inner)
                 first = len(candidates)
@@ -347,8 +347,9 @@ def _refiner(
 def _refine_part(subset, ranges, goal, target, settings, inner, deadline, progress) -> tuple:
     """(RefineResult, refined crank ranges or None) of one part (`_refiner`): a stroke when
     `ranges` are given, else the closed `target`."""
-    if ranges is not None:
-        return refine_stroke(subset, ranges, goal, settings, deadline)
+    if ranges is not None:  # of the constraints, only the pinned pivot: its gradient is zero
+        pinned = Constraints(motor_at=inner.motor_at) if inner.motor_at is not None else None
+        return refine_stroke(subset, ranges, goal, settings, deadline, pinned)
     return refine(subset, target, settings, deadline, constraints=inner or None,
                   progress=progress), None  # fmt: skip
 

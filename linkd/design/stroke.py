@@ -230,23 +230,29 @@ def _at(paths: torch.Tensor, where: torch.Tensor) -> torch.Tensor:
     return torch.complex(p[..., 0], p[..., 1]).reshape(where.shape)
 
 
-def stroke_scores(batch: LinkageBatch, crank: np.ndarray, goal: Goal) -> np.ndarray:
-    """(K,) how well each candidate's stroke over its crank range matches the goal: the mean
-    distance in order when timed, else the Chamfer distance (inf where a candidate locks)."""
+def strokes(batch: LinkageBatch, crank: np.ndarray, goal: Goal, count: int) -> tuple:
+    """Each candidate's end effector over its crank range (K, count, 2), at the goal's spacing
+    of crank angles, and (K,) whether it turns through it without locking."""
     from linkd.kinematics import trace
     from linkd.topology import assembly_plan
 
     plan = assembly_plan(batch.adjacency, batch.fixed, batch.valid)
-    t = goal.fractions(SCORE_POINTS, torch.zeros((), dtype=torch.float64))
+    t = goal.fractions(count, torch.zeros((), dtype=torch.float64))
     span = torch.as_tensor(crank[:, 1] - crank[:, 0])
     angles = torch.as_tensor(crank[:, :1]) + span[:, None] * t
     motion = trace(torch.as_tensor(batch.positions), plan, angles)
     rows = torch.arange(len(batch))
-    stroke = motion.paths[rows, torch.as_tensor(batch.end_effector)]  # (K, S, 2)
+    return motion.paths[rows, torch.as_tensor(batch.end_effector)], motion.margin > 0
+
+
+def stroke_scores(batch: LinkageBatch, crank: np.ndarray, goal: Goal) -> np.ndarray:
+    """(K,) how well each candidate's stroke over its crank range matches the goal: the mean
+    distance in order when timed, else the Chamfer distance (inf where a candidate locks)."""
+    stroke, turns = strokes(batch, crank, goal, SCORE_POINTS)
     target = torch.as_tensor(goal.samples(SCORE_POINTS))
     if goal.timed:
         score = (stroke - target).norm(dim=-1).mean(1)
     else:
         d = torch.cdist(stroke, target[None].expand(len(stroke), -1, -1))
         score = d.amin(2).mean(1) + d.amin(1).mean(1)
-    return torch.where(motion.margin > 0, score, torch.inf).numpy()
+    return torch.where(turns, score, torch.inf).numpy()

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from linkd.batch import LinkageBatch
+from linkd.constraints import Constraints
 from linkd.kinematics import trace
 
 from .refine import Objective, RefineResult, RefineSettings, Terms, point_to_polyline, refine
@@ -42,15 +43,17 @@ def refine_stroke(
     goal: Goal,
     settings: RefineSettings | None = None,
     deadline: float | None = None,
+    constraints: Constraints | None = None,
 ) -> tuple[RefineResult, np.ndarray]:
     """Refine positions and crank ranges (K, 2) of `batch` on `goal`; returns the result (its
-    `chamfer` is the score: Chamfer distance, or timing error when timed) and the ranges."""
+    `chamfer` is the score: Chamfer distance, or timing error when timed) and the ranges.
+    `constraints`: as `refine` takes them (a motor point keeps the crank pivot where it is)."""
     # Paths here run over the stroke's crank range, not a whole turn: no acceleration limit.
     s = replace(settings or RefineSettings(), max_radius=REACH, soft_acceleration=0.0)
     extra = np.stack([ranges[:, 0], ranges[:, 1] - ranges[:, 0]], 1)[:, None]
     riding = LinkageBatch(np.concatenate([batch.positions, extra], 1), batch.fixed, batch.valid,
                           batch.adjacency, batch.end_effector)  # fmt: skip
-    result = refine(riding, goal, s, deadline, StrokeObjective)
+    result = refine(riding, goal, s, deadline, StrokeObjective, constraints)
     ranges = crank_ranges(result.positions[:, -1, 0], result.positions[:, -1, 1])
     return RefineResult(result.positions[:, :-1], result.chamfer, result.iterations), ranges
 
