@@ -132,9 +132,9 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
         # shorter, less the polish's share of the difference.
         end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
         short = replace(o, time_budget=BUDGET_STEP)
-        first: dict = {}
-        default_search = _explore(goal, target, inner, short, graphs, stages, end, first)
-        report["budget_cut_refinement"] = first.get("budget_cut_refinement", False)
+        default_report: dict = {}
+        default_search = _explore(goal, target, inner, short, graphs, stages, end, default_report)
+        report["budget_cut_refinement"] = default_report.get("budget_cut_refinement", False)
         report["default_search"] = {"best": float(np.min(default_search[0].chamfer))}
         # Polished as a default run polishes: the design it would deliver is then in hand.
         _polish_stage(default_search[0], goal, inner, short, deadline, stages, None)
