@@ -141,8 +141,12 @@ def _layered(
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None and not quick:
-        narrow = [replace(options, link_width=sizes.link_width * f) for f in NARROWER]
-        tries += [resolve_sizes(mech, assembly.parts, option) for option in narrow]
+        for fraction in NARROWER:
+            narrow = replace(options, link_width=sizes.link_width * fraction)
+            try:
+                tries.append(resolve_sizes(mech, assembly.parts, narrow))
+            except ValueError:  # too narrow for a hole the user gave
+                break
     layerings = [assign_layers] if quick else [assign_layers, bent_layers, strapped_layers]
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers]
@@ -273,7 +277,7 @@ def describe_parts(
     """JSON descriptions of the plates, pins and posts (sizes in the mechanism's units); a bent
     link also has its waypoints (`bends`, assembly pose) and the STL of each bar (`pieces`), an
     arm of a split part its part (`arm_of`), a ground plate holding posts their axes (`posts`)."""
-    out = []
+    out, grounds = [], [p for p in plates(assembly, layout) if p.part == 0 and not p.sheave]
     for plate in plates(assembly, layout):
         entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
                  "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
@@ -303,7 +307,8 @@ def describe_parts(
         lo, hi = rod.span
         entry = {
             "name": rod.name, "kind": "pin", "joints": [rod.joint], "layers": [lo, hi],
-            "joins": [assembly.parts[m].name for m in rod.members],
+            "joins": [_ground_plate(grounds, rod) if m == 0 else assembly.parts[m].name
+                      for m in rod.members],
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
         }  # fmt: skip
         if rod.joint in fixed:
@@ -324,6 +329,14 @@ def describe_parts(
             "length": (hi - lo) * sizes.pitch + sizes.thickness,
         })  # fmt: skip
     return out
+
+
+def _ground_plate(grounds: list, rod) -> str:
+    """The ground plate a pin of the ground stands in: the base, the cover or a bracket, the one
+    on an end of its span that holds its joint."""
+    lo, hi = rod.span
+    held = [p.name for p in grounds if rod.joint in p.joints and p.layer in (lo, hi)]
+    return held[0] if held else grounds[0].name
 
 
 def buildable(mech: Mechanism, options: ExportOptions | None = None, quick: bool = False) -> bool:

@@ -78,6 +78,9 @@ def resolve_sizes(mech: Mechanism, parts: list[Part], options: ExportOptions | N
     if not sizes.hole_diameter < sizes.link_width:
         raise ValueError(f"the hole diameter ({sizes.hole_diameter:g}) must be smaller than the "
                          f"link width ({sizes.link_width:g})")  # fmt: skip
+    if spacing and not sizes.hole_diameter < min(spacing):  # the holes of a part would merge
+        raise ValueError(f"the hole diameter ({sizes.hole_diameter:g}) must be smaller than the "
+                         f"least spacing of two joints of a part ({min(spacing):g})")  # fmt: skip
     return sizes
 
 

@@ -118,6 +118,7 @@ def test_design_writes_a_verified_export_on_the_users_curve(pool, curve_file, tm
         assert path.stat().st_mode & 0o777 == (0o777 if path.is_dir() else 0o666) & ~umask, path
     report = json.loads((out / "report.json").read_text())
     assert report["verification"]["passed"]
+    assert report["export"]["sizes"] == outcome.design.export.sizes  # what built it
     search = report["search"]  # the pool's designs are all valid; each offers sub-mechanisms
     assert search["proposed"] == search["valid"] < search["placed"]
     assert {"read_s", "propose_s", "align_s", "refine_s", "verify_s", "write_s", "total_s"} <= set(

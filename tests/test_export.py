@@ -174,6 +174,15 @@ def test_ground_pins_stand_in_the_base_or_hang_from_the_cover():
     assert jansen.top_joints == () and jansen.minimal
 
 
+def test_a_pin_of_the_ground_names_the_ground_plate_it_stands_in(tmp_path):
+    parts = {p["name"]: p for p in export_mechanism(CRANK_PLATE, tmp_path, set()).parts}
+    pins = [p for p in parts.values() if p["kind"] == "pin" and "ground" in " ".join(p["joins"])]
+    assert {name for pin in pins for name in pin["joins"]} >= {"ground", "ground_cover"}
+    for pin in pins:
+        (plate,) = [parts[name] for name in pin["joins"] if name.startswith("ground")]
+        assert pin["joints"][0] in plate["joints"] and plate["layer"] in pin["layers"]
+
+
 def test_a_ground_pin_held_from_both_plates_is_two_stubs_either_side_of_the_passing_parts():
     """Where neither base nor cover can hold a ground pin whole, its parts below the parts that
     pass over the joint turn on a pin standing in the base, those above on a stub hanging from

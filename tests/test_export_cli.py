@@ -66,11 +66,27 @@ def test_export_replaces_its_own_output_and_refuses_other_folders(tmp_path):
     assert (other / "mechanism.json").exists()
 
 
-def test_an_export_that_fails_verification_exits_1_and_is_kept_to_inspect(tmp_path, capsys):
-    # links far too wide for the crank rocker: its plates collide
+def test_an_export_that_fails_verification_exits_1_and_is_kept_to_inspect(
+    tmp_path, capsys, monkeypatch
+):
+    """A defect planted in the layering (every moving part on one layer): MuJoCo finds the
+    plates touching, and the folder is kept to inspect."""
+    import dataclasses
+
+    import numpy as np
+
+    from linkd import export as exporter
+
+    layered = exporter._layered
+
+    def flat(*args, **kwargs):
+        sizes, layout = layered(*args, **kwargs)
+        return sizes, dataclasses.replace(layout, layers=np.minimum(layout.layers, 1))
+
+    monkeypatch.setattr(exporter, "_layered", flat)
     out = tmp_path / "out"
     mech = str(EXAMPLES / "crank_rocker.json")
-    assert main(["export", mech, "--out", str(out), "--link-width", "500"]) == 1
+    assert main(["export", mech, "--out", str(out)]) == 1
     assert "failed verification: " in capsys.readouterr().out
     report = json.loads((out / "report.json").read_text())
     assert not report["verification"]["passed"] and "collisions" in report["verification"]["failed"]
@@ -133,6 +149,7 @@ def test_a_failed_run_leaves_no_folders_it_made(tmp_path, monkeypatch):
         (["--link-width", "-1"], "link width"),
         (["--link-width", "nan"], "link width"),
         (["--density", "0"], "density"),
+        (["--link-width", "80"], "least spacing of two joints of a part (15)"),  # holes merge
     ],
 )
 def test_bad_options_exit_2_and_write_nothing(tmp_path, capsys, args, named):
@@ -151,5 +168,19 @@ def test_malformed_and_invalid_mechanisms(tmp_path, capsys):
     locked = tmp_path / "locked.json"
     classic.non_grashof_four_bar().save(locked)
     assert main(["export", str(locked), "--out", str(out)]) == 1
-    assert "locks" in capsys.readouterr().out
+    assert "locks" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_hole_the_usual_width_holds_is_built_however_narrow_the_fallbacks(tmp_path):
+    """The narrower widths tried when the usual one does not layer are left out where they
+    cannot hold the hole asked for; the usual width still builds."""
+    from linkd.export.options import resolve_sizes
+    from linkd.export.parts import assemble
+    from linkd.mechanism import Mechanism
+
+    mech = Mechanism.load(EXAMPLES / "crank_rocker.json")
+    usual = resolve_sizes(mech, assemble(mech).parts, None)
+    hole = str(0.5 * usual.link_width)  # wider than a quarter of the width
+    args = ["export", str(EXAMPLES / "crank_rocker.json"), "--hole-diameter", hole]
+    assert main([*args, "--out", str(tmp_path / "out"), "--export", "mjcf"]) == 0

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -17,7 +18,15 @@ from linkd.outdir import fresh_name, staged_output, write_atomic
 from linkd.scale import check_mechanism_size
 
 FORMATS = ("mjcf", "stl")
-SIZES = ("link_width", "hole_diameter", "thickness", "layer_gap", "clearance", "density")
+SIZES = {  # each export size option and its default (`linkd.export.options.resolve_sizes`)
+    "link_width": "12%% of the mechanism's RMS radius, at most 60%% of the least spacing of "
+    "two joints of a part",
+    "hole_diameter": "0.4 x the link width",
+    "thickness": "0.4 x the link width",
+    "layer_gap": "0.1 x the link width",
+    "clearance": "0.2 x the link width",
+    "density": "1200",
+}
 
 
 EPILOG = """\
@@ -41,10 +50,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", help="output folder (default: <mechanism>-export, a name not yet "
                    "taken)")  # fmt: skip
     p.add_argument("--force", action="store_true", help="replace OUT whatever it holds")
-    for name in SIZES:
+    for name, default in SIZES.items():
         unit = "kg/m^3" if name == "density" else "mechanism units"
         flag = "--" + name.replace("_", "-")
-        p.add_argument(flag, type=float, help=f"{name.replace('_', ' ')} ({unit})")
+        p.add_argument(flag, type=float,
+                       help=f"{name.replace('_', ' ')} ({unit}; default: {default})")  # fmt: skip
     p.set_defaults(run=run)
 
 
@@ -69,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     check_mechanism_size(mech.positions, mech.units, args.mechanism)
     status, _ = validate_mechanism(mech)
     if status:
-        print(f"{args.mechanism}: invalid: {status.reason}")
+        print(f"{args.mechanism}: invalid: {status.reason}", file=sys.stderr)
         return 1
     given = {name: getattr(args, name) for name in SIZES if getattr(args, name) is not None}
     options = ExportOptions(**given)
@@ -104,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
             report = _report(result, verification, timings)
             write_atomic(stage / "report.json", json.dumps(report, indent=2))
     except ValueError as exc:
-        print(f"{args.mechanism}: cannot export: {exc}")
+        print(f"{args.mechanism}: cannot export: {exc}", file=sys.stderr)
         return 1
     kinds = ", ".join(f"{n} {kind}" for kind, n in _counts(result.parts).items())
     width = result.sizes["link_width"]

@@ -175,6 +175,7 @@ def design(
                     "timed": o.timed,
                 },
                 "design": summary(found),
+                "export": {"sizes": found.export.sizes},  # as `linkd export` reports them
                 **({"constraints": [m.to_dict() for m in measured]} if measured else {}),
                 "search": report_search,
                 "alternatives": alternatives,
