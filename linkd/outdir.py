@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -61,14 +62,17 @@ def staged_output(
     final = Path(final)
     check_replaceable(final, force, inputs)
     made = [p for p in final.parents if not p.exists()]  # the folders to make, deepest first
+    _hold(signal.SIG_BLOCK)  # Ctrl-C or SIGTERM now would leave the staging folder behind
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
         staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", dir=final.parent))
     except OSError as exc:
+        _hold(signal.SIG_UNBLOCK)
         _remove(made)
         raise InputError(f"{final}: cannot make the folder ({exc.strerror})") from None
-    os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it private; outputs are ordinary folders
     try:
+        _hold(signal.SIG_UNBLOCK)  # one that came meanwhile is raised here, and cleaned up
+        os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it private: make it ordinary
         yield staging
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
@@ -81,6 +85,12 @@ def staged_output(
     os.replace(staging, final)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+
+
+def _hold(how: int) -> None:
+    """Block or unblock the signals that end a run (where the platform can)."""
+    if hasattr(signal, "pthread_sigmask"):
+        signal.pthread_sigmask(how, {signal.SIGINT, signal.SIGTERM})
 
 
 def _remove(made: list[Path]) -> None:

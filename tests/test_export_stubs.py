@@ -24,7 +24,7 @@ def test_the_two_stubs_are_built_and_verified(split_ground):
     base, stub = parts["pin_0"], parts["pin_0_top"]
     cover = parts["ground_cover"]
     assert base["layers"][0] == 0 and stub["layers"][1] == cover["layer"] == result.layers - 1
-    assert base["joins"] == ["ground", "link_0_1"] and stub["joins"] == ["ground", "link_0_6"]
+    assert base["joins"] == ["ground", "link_0_1"] and stub["joins"] == ["ground_cover", "link_0_6"]
     assert 0 in parts["ground"]["joints"] and 0 in cover["joints"]
     for name in ("pin_0", "pin_0_top"):  # each stub reaches exactly the plates it joins
         layers = [parts[j]["layer"] for j in parts[name]["joins"] if j != "ground"]
