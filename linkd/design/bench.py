@@ -264,10 +264,9 @@ def _held(rows: list[dict]) -> dict:
 
 def stages(rows: list[dict]) -> dict:
     """Mean over the curves of the best error each stage reached (normalised frame, the
-    refinement's own measure): placed candidates from the proposer, from the proposer and the
-    atlas, then refined, after the later rounds, and after the polish at finer crank angles. A
-    curve without a figure for a stage (the source offered nothing) counts with the stage
-    before."""
+    refinement's own measure): placed candidates from the proposer, from it and the atlas, then
+    refined, after the later rounds, and after the polish at finer crank angles. A curve without
+    a figure for a stage (the source offered nothing) counts with the stage before."""
     columns: dict[str, list[float]] = {}
     for row in rows:
         sources = row.get("sources") or {}

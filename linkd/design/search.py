@@ -386,9 +386,8 @@ def _atlas(path: str | None) -> Atlas | None:
 
 
 def _contribution(candidates: Candidates, source: int, placed: np.ndarray) -> dict:
-    """What one source offered: its candidates placed on the target and refined (those whose
-    refinement kept within its limits, as `refined` counts them), and the best of each
-    (`placed`: the errors before refinement)."""
+    """What one source offered: its candidates placed and refined (within the limits, as
+    `refined` counts them), and the best of each (`placed`: the errors before refinement)."""
     mine = candidates.source == source
     refined = candidates.chamfer[mine & candidates.refined]
     return {"placed": int(mine.sum()),
