@@ -333,10 +333,10 @@ def describe_parts(
 
 def _ground_plate(grounds: list, rod) -> str:
     """The ground plate a pin of the ground stands in: the base, the cover or a bracket, the one
-    on an end of its span that holds its joint."""
+    holding its joint on a layer it spans (an end, or a bracket a forked part's shaft turns in
+    between its arms)."""
     lo, hi = rod.span
-    held = [p.name for p in grounds if rod.joint in p.joints and p.layer in (lo, hi)]
-    return held[0] if held else grounds[0].name
+    return next(p.name for p in grounds if rod.joint in p.joints and lo <= p.layer <= hi)
 
 
 def buildable(mech: Mechanism, options: ExportOptions | None = None, quick: bool = False) -> bool:

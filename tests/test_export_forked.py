@@ -102,6 +102,7 @@ def test_a_crank_walled_in_by_its_pins_is_forked_round_a_bracket(bicycle, monkey
     parts = {p["name"]: p for p in result.parts}
     bracket, shaft = parts["ground_bracket0"], parts["pin_0"]
     assert bracket["joints"] == [0] and shaft["fixed_in"] == name
+    assert shaft["joins"] == ["ground_bracket0", name]  # the bracket it turns in, not the base
     low, high = sorted(rods[2], key=lambda pin: pin["layers"])
     assert shaft["layers"][0] < bracket["layer"] < shaft["layers"][1]
     assert low["layers"][1] < bracket["layer"] < high["layers"][0]  # the rods stop short of it
