@@ -75,8 +75,8 @@ def jansen_walker(phases: int = 1, mirrored: bool = True) -> Mechanism:
     if phases < 1 or phases % 2 == 0:
         raise ValueError(f"a walker's crank needs an odd number of pins, got {phases}")
     angles = np.pi / 2 + 2 * np.pi * np.arange(phases) / phases
-    flip = np.array([-1.0, 1.0])
-    frame = jansen_leg().positions[2]
+    flip, leg = np.array([-1.0, 1.0]), jansen_leg()
+    frame = leg.positions[2]
     positions = [np.zeros(2), jansen_leg(angles[0]).positions[1], frame]
     positions += [frame * flip] if mirrored else []
     links, feet = [(0, 1)], []
@@ -94,7 +94,7 @@ def jansen_walker(phases: int = 1, mirrored: bool = True) -> Mechanism:
             for j in range(3, 8):
                 index[j] = len(positions)
                 positions.append(joints[j])
-            links += [(index[i], index[j]) for i, j in jansen_leg().links if (i, j) != (0, 1)]
+            links += [(index[i], index[j]) for i, j in leg.links if (i, j) != (0, 1)]
             feet.append(index[7])
     fixed = [k in (0, 2, 3 if mirrored else 2) for k in range(len(positions))]
     return Mechanism(positions, fixed, links, (0, 1), feet[0])

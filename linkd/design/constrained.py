@@ -66,10 +66,7 @@ def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candid
         factor = _fit_about_origin(u, v, factor)
     factor = factor.double()
     chamfer = _chamfer(_turn(even, factor), goal)
-    rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
-    moved = _turn(rel, factor).numpy() + np.asarray(motor)
-    moved[:, 0] = motor  # exactly
-    placed = LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
+    placed = _about(batch, factor, motor)
     score = np.nan_to_num(chamfer.numpy(), nan=np.inf)
     order = np.argsort(score, kind="stable")
     return Candidates(placed.subset(order), score[order], candidates.source[order])
@@ -92,14 +89,20 @@ def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candida
     if not goal.timed:  # the path's points need not be reached in order: nearest points
         for _ in range(PIN_STEPS):
             factor = _fit_about_origin(torch.view_as_real(u).float(), goal_points.float(), factor)
-    rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
-    moved = _turn(rel, factor.double()).numpy() + np.asarray(motor)
-    moved[:, 0] = motor  # exactly
-    placed = LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
+    placed = _about(batch, factor.double(), motor)
     score = stroke_scores(placed, candidates.ranges, goal)
     order = np.argsort(score, kind="stable")
     return Candidates(placed.subset(order), score[order], candidates.source[order],
                       ranges=candidates.ranges[order])  # fmt: skip
+
+
+def _about(batch: LinkageBatch, factor: torch.Tensor, motor: np.ndarray) -> LinkageBatch:
+    """The linkages scaled and turned about their crank pivots by `factor` (B, 2), each pivot
+    then exactly on `motor`."""
+    rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
+    moved = _turn(rel, factor).numpy() + np.asarray(motor)
+    moved[:, 0] = motor  # exactly
+    return LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
 
 
 def _turn(points: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
