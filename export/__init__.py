@@ -4,12 +4,13 @@
     result = export_mechanism(mech, Path("out"), {"mjcf", "stl"})
 
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
-analytic kinematics (`layers`; where straight parts cannot be layered, links bend round pins,
-`routing`; where bent ones cannot either, a link or two may turn on sheaves as eccentric
-straps, `strapped`, then plates are cut into arms and ground pins are held by brackets or as
-two stubs from base and cover, `braced`, and failing that a part forks, `forked`), plates
-become STL meshes
-(`meshes`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
+analytic kinematics (`layers`; where straight parts cannot be layered, links bend round
+pins, `routing`; where bent ones cannot either, a mechanism made of modules on one crank is
+stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
+sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
+held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
+`forked`), plates become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges,
+pins, loop closures and crank servo become `mechanism.xml`
 with a `scene.xml` around it (`mjcf`).
 """
 
@@ -29,7 +30,8 @@ from linkd.validator import validate_mechanism
 
 from .braced import braced_layers
 from .forked import forked_layers
-from .layers import Layout, assign_layers, find_conflicts, plate_points, plates, post_spans, sweep
+from .framed import framed_layers, modular
+from .layers import Layout, assign_layers, find_conflicts, sweep
 from .mjcf import (
     PROBE_DENSITY,
     TIMESTEP,
@@ -42,6 +44,7 @@ from .mjcf import (
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
+from .plates import plate_points, plates, posts
 from .refusal import why_refused
 from .rods import keyed, pin_rods
 from .routing import bent_layers
@@ -52,7 +55,8 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "set_timestep"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
-CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
+CONSTRUCTIONS = {assign_layers: "straight parts", framed_layers: "modules between frames",
+                 bent_layers: "bent links",
                  strapped_layers: "eccentric straps", braced_layers: "split plates and brackets",
                  forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
@@ -133,7 +137,8 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    then parts turn on sheaves as eccentric straps (`strapped`), and then plates are cut into
+    then modules on one crank are stacked between frames (`framed`), then parts turn on
+    sheaves as eccentric straps (`strapped`), and then plates are cut into
     arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
     `options.brackets` is off), then a part forks; those two are SCREENED. Widths the user gave
     are kept (the other constructions are still tried; ValueError when nothing works). quick:
@@ -148,6 +153,8 @@ def _layered(
             except ValueError:  # too narrow for a hole the user gave
                 break
     layerings = [assign_layers] if quick else [assign_layers, bent_layers, strapped_layers]
+    if modular(assembly) and not quick:  # a quick small search, before the straps' large one
+        layerings.insert(2, framed_layers)
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers]
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
@@ -322,9 +329,9 @@ def describe_parts(
             "joins": [name], "diameter": sizes.hole_diameter, "fixed_in": name,
             "length": (hi - lo) * sizes.pitch + sizes.thickness,
         })  # fmt: skip
-    for k, ((lo, hi), bracket) in enumerate(zip(post_spans(layout), layout.brackets)):
+    for k, (point, (lo, hi)) in enumerate(posts(layout)):
         out.append({
-            "name": f"{assembly.parts[0].name}_post{k}", "kind": "post", "at": list(bracket.post),
+            "name": f"{assembly.parts[0].name}_post{k}", "kind": "post", "at": list(point),
             "layers": [lo, hi], "diameter": sizes.hole_diameter,
             "length": (hi - lo) * sizes.pitch + sizes.thickness,
         })  # fmt: skip

@@ -122,70 +122,8 @@ class Layout:
     cover_stubs: dict[int, tuple[int, int]] = field(default_factory=dict)  # see `rods.pin_rods`
     forks: dict[int, Fork] = field(default_factory=dict)  # pins cut into rods, by pin index
     straps: tuple[Strap, ...] = ()  # parts that turn on sheaves (`strapped`)
-
-
-@dataclass(frozen=True)
-class Plate:
-    """A solid plate of a part on one layer (the ground has a base and maybe a cover)."""
-
-    name: str
-    part: int
-    joints: tuple[int, ...]  # joints it has holes for
-    layer: int
-    bends: tuple[tuple[float, float], ...] = ()  # waypoints of a bent link, between its joints
-    posts: tuple[tuple[float, float], ...] = ()  # ground posts it holds (outline and holes)
-    bore: float = 0.0  # a strap: the radius of its bore round its first joint (`strapped`)
-    sheave: float = 0.0  # a sheave: a disc of this radius round its first joint
-
-
-def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
-    """Every plate of the layout: the ground's base (and cover) and brackets, the sheaves of
-    straps, then one per moving part, or one per arm of a split part."""
-    ground = assembly.parts[0]
-    held = {b.joint for b in layout.brackets}
-    base = tuple(j for j in ground.joints if j not in layout.top_joints and j not in held)
-    stubs = (assembly.pins[k].joint for k in layout.cover_stubs)
-    cover = tuple(sorted({*layout.top_joints, *stubs}))
-    low = tuple(b.post for b in layout.brackets if not b.top)
-    high = tuple(b.post for b in layout.brackets if b.top)
-    out = [Plate(ground.name, 0, base, 0, posts=low)] if base or low else []
-    if cover or high:
-        out.append(Plate(f"{ground.name}_cover", 0, cover, layout.count - 1, posts=high))
-    for k, b in enumerate(layout.brackets):
-        out.append(Plate(f"{ground.name}_bracket{k}", 0, (b.joint,), b.layer, posts=(b.post,)))
-    straps = {strap.part: strap for strap in layout.straps}
-    for strap in layout.straps:
-        through = (assembly.pins[k].joint for k in strap.passing)
-        out.append(Plate(sheave_name(assembly, strap), strap.sheave_of, (strap.joint, *through),
-                         int(layout.layers[strap.part]), sheave=strap.radius))  # fmt: skip
-    for p, part in enumerate(assembly.parts[1:], start=1):
-        if p in straps:
-            joint = straps[p].joint
-            joints = (joint, *(j for j in part.joints if j != joint))
-            out.append(Plate(part.name, p, joints, int(layout.layers[p]), bore=straps[p].radius))
-            continue
-        for k, arm in enumerate(layout.arms.get(p, ())):
-            out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
-        if p not in layout.arms:
-            bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
-            out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
-    return out
-
-
-def sheave_name(assembly: Assembly, strap: Strap) -> str:
-    """The sheave's plate and body: named after the strap that turns on it."""
-    return f"{assembly.parts[strap.part].name}_sheave"
-
-
-def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:
-    """(k, 2) points a plate is made round, each with a hole: its joints, then its posts."""
-    return np.concatenate([mech.positions[list(plate.joints)], np.reshape(plate.posts, (-1, 2))])
-
-
-def post_spans(layout: Layout) -> list[tuple[int, int]]:
-    """(lowest, highest) layer of each bracket's post: from the base, or up to the cover."""
-    top = layout.count - 1
-    return [(b.layer, top) if b.top else (0, b.layer) for b in layout.brackets]
+    frames: tuple[int, ...] = ()  # layers of ground plates between modules (`framed`)
+    frame_posts: tuple[tuple[float, float], ...] = ()  # posts holding them, base to cover
 
 
 @dataclass(frozen=True)

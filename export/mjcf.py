@@ -32,10 +32,11 @@ import numpy as np
 
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
-from .layers import Layout, Plate, plate_points, plates, post_spans, sheave_name
+from .layers import Layout
 from .options import Sizes
 from .parts import CRANK, Assembly, hinge_angles, part_origins
 from .planar import convex_hull
+from .plates import Plate, plate_points, plates, posts, sheave_name
 from .rods import pin_rods
 
 if TYPE_CHECKING:
@@ -210,12 +211,12 @@ class _Builder:
                       pos=_fmt(x, y, zc), euler=_fmt(0, 0, angle))  # fmt: skip
 
     def posts(self) -> None:
-        """The brackets' posts: rods of the pin diameter on the ground, from the base plate up
-        to the bracket or from the bracket up to the cover."""
+        """The ground's posts: rods of the pin diameter, from the base plate up to a bracket or
+        from a bracket up to the cover, or from base to cover holding the frames."""
         name = self.assembly.parts[0].name
-        for k, (bracket, (lo, hi)) in enumerate(zip(self.layout.brackets, post_spans(self.layout))):
+        for k, (point, (lo, hi)) in enumerate(posts(self.layout)):
             bottom, top = lo * self.pitch, hi * self.pitch + self.thickness
-            x, y = (np.asarray(bracket.post) - self.origin[0]) * self.unit
+            x, y = (np.asarray(point) - self.origin[0]) * self.unit
             ET.SubElement(self.bodies[0], "geom", name=f"{name}_post{k}", type="cylinder",
                           size=_fmt(self.hole / 2, (top - bottom) / 2),
                           pos=_fmt(x, y, (top + bottom) / 2), rgba="0.75 0.75 0.78 1")  # fmt: skip

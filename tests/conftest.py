@@ -8,7 +8,7 @@ import pytest
 import torch
 from hypothesis import settings
 
-from linkd.export import ExportOptions, buildable, strapped
+from linkd.export import ExportOptions, buildable, framed, strapped
 from linkd.generator import GeneratorSettings, generate
 from linkd.graph import from_graph
 
@@ -29,18 +29,23 @@ def one_thread():
 
 
 @contextmanager
-def no_straps():
-    """No eccentric straps (`linkd.export.strapped`) within."""
+def no_straps_nor_frames():
+    """No eccentric straps (`linkd.export.strapped`) nor frames (`linkd.export.framed`) within."""
+
+    def no_modules(*args, **kwargs):
+        raise ValueError("not modules on one crank: frames are off")
+
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(strapped, "MAX_STRAPS", 0)
+        patch.setattr(framed, "_modules", no_modules)
         yield
 
 
 @pytest.fixture(scope="module")
-def straps_off():
-    """No straps: the mechanisms that test the constructions tried after them are built with
-    straps when those are on."""
-    with no_straps():
+def straps_and_frames_off():
+    """No straps nor frames: the mechanisms that test the constructions tried after them are
+    built with straps or frames when those are on."""
+    with no_straps_nor_frames():
         yield
 
 
@@ -52,7 +57,7 @@ def pool():
     its very path, which the design tests would deliver instead of the sample itself."""
     graphs = generate(12, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
     flat = ExportOptions(brackets=False)
-    with no_straps():
+    with no_straps_nor_frames():
         first = next((k for k, g in enumerate(graphs) if buildable(from_graph(g), flat)), None)
     assert first is not None, "no exportable design in the pool"
     return np.concatenate([graphs[first:], graphs[:first]])

@@ -12,7 +12,6 @@ from linkd.export.layers import (
     assign_layers,
     find_conflicts,
     hull_edges,
-    plates,
     stack_layers,
     sweep,
 )
@@ -20,6 +19,7 @@ from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import CRANK, assemble, rigid_parts
 from linkd.export.planar import convex_hull, segment_distance
+from linkd.export.plates import plates
 from linkd.export.rods import pin_rods
 from linkd.geometry import Similarity, rotation
 from linkd.mechanism import UNITS_IN_METRES, Mechanism

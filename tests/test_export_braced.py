@@ -17,7 +17,7 @@ from linkd.export.routing import bent_layers
 from linkd.mechanism import Mechanism
 from linkd.verify import verify_output
 
-pytestmark = pytest.mark.usefixtures("straps_off")  # these build with straps otherwise
+pytestmark = pytest.mark.usefixtures("straps_and_frames_off")  # built otherwise with those
 
 # Generated (seed 2026, no. 90 of 200): refused before plates other than the crank could split.
 # Its five-joint plate splits on a shaft at joint 8, which no other part shares, and ground

@@ -11,7 +11,7 @@ from linkd.export import export_mechanism
 from linkd.mechanism import Mechanism
 from linkd.verified import export_verified
 
-pytestmark = pytest.mark.usefixtures("straps_off")  # these build with straps otherwise
+pytestmark = pytest.mark.usefixtures("straps_and_frames_off")  # built otherwise with those
 
 # Generated (seed 2026, no. 147 of 200). Links 1-4, 2-7 and 6-8 hang on the crank plate
 # 0-1-2-6 and each sweeps over the others' joints in the plate's frame; ground pivot 0 is

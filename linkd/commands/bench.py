@@ -231,12 +231,16 @@ def export(args: argparse.Namespace) -> int:
         if report.passed and any("bends" in part for part in result.parts):
             outcome["  of which with bent links"] += 1
         pins = [part for part in result.parts if part["kind"] == "pin"]
-        forked = any(re.fullmatch(r"pin_\d+[a-z]", pin["name"]) for pin in pins)  # cut into rods
+        framed = any("_frame" in part["name"] for part in result.parts)  # its own rods and posts
+        if report.passed and framed:
+            outcome["  of which between frames"] += 1
+        forked = not framed and any(re.fullmatch(r"pin_\d+[a-z]", pin["name"]) for pin in pins)
         if report.passed and forked:
             outcome["  of which forked"] += 1
         if report.passed and any(part["kind"] == "sheave" for part in result.parts):
             outcome["  of which strapped"] += 1
-        if report.passed and not forked and any("arm_of" in part for part in result.parts):
+        split = not (forked or framed) and any("arm_of" in part for part in result.parts)
+        if report.passed and split:
             outcome["  of which with split plates"] += 1
         arms: dict[str, list[set]] = {}
         for part in result.parts:
@@ -244,7 +248,7 @@ def export(args: argparse.Namespace) -> int:
                 arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
         if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
-        if report.passed and any(part["kind"] == "post" for part in result.parts):
+        if report.passed and not framed and any(part["kind"] == "post" for part in result.parts):
             outcome["  of which on a bracket"] += 1
         if report.passed and any(pin["name"].endswith("_top") for pin in pins):
             outcome["  of which on ground stubs"] += 1  # a pin and a stub at one joint
@@ -252,7 +256,8 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
     print(f"export: {len(mechanisms)} {what}")
-    for name in ("verified", "  of which with narrower links", "  of which with bent links",
+    for name in ("verified", "  of which between frames",
+                 "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
                  "  of which on ground stubs", "  of which with a finer step",
