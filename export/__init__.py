@@ -55,9 +55,9 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "set_timestep"]  # fmt: skip
 
 FORMATS = frozenset({"mjcf", "stl"})
-CONSTRUCTIONS = {assign_layers: "straight parts", framed_layers: "modules between frames",
-                 bent_layers: "bent links",
-                 strapped_layers: "eccentric straps", braced_layers: "split plates and brackets",
+CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
+                 framed_layers: "modules between frames", strapped_layers: "eccentric straps",
+                 braced_layers: "split plates and brackets",
                  forked_layers: "forked parts"}  # fmt: skip
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
@@ -193,7 +193,8 @@ def _layered(
         why = why_refused(assembly, conflicts, narrowest)
         if why:
             culprits = f"; with straight parts, {why} alone cannot all be kept clear"
-    tried = f"straight, bent, strapped, split and forked parts{widths} tried{culprits}"
+    framed = ", framed" if framed_layers in layerings else ""
+    tried = f"straight, bent{framed}, strapped, split and forked parts{widths} tried{culprits}"
     raise ValueError(f"{first} ({tried})")
 
 
