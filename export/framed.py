@@ -160,6 +160,8 @@ def _modules(assembly: Assembly, apart: bool) -> tuple[list[list[int]], list[tup
     used = [
         own & {j for p in parts for j in assembly.parts[p].joints} for parts in modules.values()
     ]
+    if not all(used):
+        raise ValueError("not modules on one crank: a group of parts does not reach the crank")
     used[0] |= own - set().union(*used)
     return list(modules.values()), [tuple(sorted(joints | {motor})) for joints in used]
 

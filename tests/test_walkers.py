@@ -77,13 +77,11 @@ def test_three_mirrored_pairs_are_built_between_frames_and_verified(three_pairs)
         ]
         assert lo < mine[0] < min(legs) and max(legs) < hi
         assert parts[f"pin_{pin}"]["layers"] == [mine[0], max(mine[1:] or legs)]
-        assert len(mine) == 1 or max(legs) < mine[1]  # the crank pin fixed in both arms
+        assert len(mine) == 1 or max(legs) < mine[1]  # the legs between the two arms
     # the motor's pin: journals fixed in the crank, from the base and through each frame
-    journals = [parts[f"pin_0{letter}"]["layers"] for letter in "abc"]
-    assert journals[0][0] == 0 and all(
-        j[0] < floor < j[1] for j, floor in zip(journals[1:], floors[1:])
-    )
     journals = [parts[f"pin_0{letter}"] for letter in "abc"]
+    spans = [journal["layers"] for journal in journals]
+    assert spans[0][0] == 0 and all(lo < at < hi for (lo, hi), at in zip(spans[1:], floors[1:]))
     assert all(j["fixed_in"] == "plate_0_1_14_25" for j in journals) and "pin_0d" not in parts
     posts = [part for part in result.parts if part["kind"] == "post"]
     assert len(posts) == 3 and all(post["layers"] == [0, result.layers - 1] for post in posts)
