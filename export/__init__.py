@@ -19,6 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -59,6 +60,9 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  framed_layers: "modules between frames", strapped_layers: "eccentric straps",
                  braced_layers: "split plates and brackets",
                  forked_layers: "forked parts"}  # fmt: skip
+# Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
+# small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
+QUICK_STRAPS = 12
 NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when it cannot layer
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
@@ -137,7 +141,8 @@ def _layered(
     over a pin whose plates would lie above and below it, in every order), narrower links may
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
-    then modules on one crank are stacked between frames (`framed`), then parts turn on
+    then modules on one crank are stacked between frames (`framed`; where they build it, the
+    first QUICK_STRAPS strap choices may still do with fewer layers), then parts turn on
     sheaves as eccentric straps (`strapped`), and then plates are cut into
     arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
     `options.brackets` is off), then a part forks; those two are SCREENED. Widths the user gave
@@ -164,8 +169,11 @@ def _layered(
             swept[size.link_width] = sweep(mech, size.link_width)
         return swept[size.link_width]
 
-    first = None
+    first, framed = None, None  # framed: the frames' build, while the straps try briefly
     for layering in layerings:
+        if framed is not None and layering is not strapped_layers:
+            return framed
+        build = partial(layering, searches=QUICK_STRAPS) if framed else layering
         screened = layering in SCREENED and len(tries) > 2
         fallback = None  # a screened construction's layout at the narrowest width
         for size in [tries[0], tries[-1], *tries[1:-1]] if screened else tries:
@@ -173,17 +181,24 @@ def _layered(
             width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
             progress(f"layering {CONSTRUCTIONS[layering]} at {width}")
             try:
-                layout = layering(assembly, paths(size), size)
+                layout = build(assembly, paths(size), size)
             except ValueError as exc:
                 first = first or exc
                 if screened and size is tries[-1]:
                     break  # none at the loosest width: the ones between are not tried
                 continue
+            if layering is framed_layers:
+                framed = size, layout
+                break
+            if framed is not None:  # the straps' build, if it has fewer layers
+                return min((size, layout), framed, key=lambda built: built[1].count)
             if not (screened and size is tries[-1]):
                 return size, layout
             fallback = size, layout  # but a wider one between may layer too
         if fallback is not None:
             return fallback
+    if framed is not None:
+        return framed
     widths = f", down to {NARROWER[-1]:g} of the usual width" if len(tries) > 1 else ""
     culprits = ""
     if not quick:  # which pins, for the designer to move: found at the narrowest width tried

@@ -33,8 +33,11 @@ from .planar import convex_hull, cross, point_segment
 MAX_STRAPS = 120  # layer searches per width before the construction gives up
 
 
-def strapped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with one or two parts made straps (NoFlatLayers when no choice tried layers)."""
+def strapped_layers(
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes, searches: int | None = None
+) -> Layout:
+    """Layers with one or two parts made straps (NoFlatLayers when no choice tried layers),
+    within MAX_STRAPS layer searches or `searches` if fewer."""
     conflicts = find_conflicts(assembly, paths, sizes)
     options = _candidates(assembly, conflicts, paths[:, 0], sizes)
     freed = {s: _inside(assembly, paths[:, 0], sizes, s) & _near(conflicts, s) for s in options}
@@ -44,7 +47,7 @@ def strapped_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layo
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering", False)
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
     choices = [(s,) for s in ranked] + list(combinations(ranked, 2))
-    for chosen in islice(choices, MAX_STRAPS):
+    for chosen in islice(choices, min(MAX_STRAPS, searches or MAX_STRAPS)):
         if len({s.part for s in chosen}) < len(chosen):
             continue
         layout = _layered(assembly, _with_straps(assembly, conflicts, paths, sizes, chosen), sizes)
