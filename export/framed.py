@@ -47,7 +47,7 @@ POST_MARGIN = 2.0  # link widths between a post and the farthest point the mecha
 def framed_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """Layers of the modules stacked between frames, the fewer of modules joined at their crank
     pins and modules apart there, each on its own arms (ValueError where the mechanism is not
-    modules on one crank, or no module has a layering)."""
+    modules on one crank, or a module has no layering)."""
     found, refusal = [], None
     for apart in (False, True):
         try:
