@@ -28,7 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layers import Arm, Conflicts, Fork, Layout, find_conflicts
+from .braced import POST_MARGIN
+from .layers import Arm, Conflicts, Fork, Layout, find_conflicts, least_gap
 from .options import Sizes
 from .parts import Assembly, Part, Pin
 from .stacking import (
@@ -41,7 +42,6 @@ from .stacking import (
 )
 
 POSTS = 3  # posts holding the frames, evenly round the motor's pivot
-POST_MARGIN = 2.0  # link widths between a post and the farthest point the mechanism sweeps
 
 
 def framed_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -123,7 +123,7 @@ def _framed(assembly: Assembly, paths: np.ndarray, sizes: Sizes, modules: tuple)
             continue
         at = [layer for p in pin.members for layer in _layers_at(layers, index, arms, p, pin.joint)]
         spans.append((min(at), max(at)))
-    return Layout(real, spans, (), frames[-1] + 1, _gap(conflicts, layers, sizes), False,
+    return Layout(real, spans, (), frames[-1] + 1, least_gap(conflicts, layers, sizes), False,
                   arms={crank: arms}, forks=forks, frames=tuple(frames[1:-1]),
                   frame_posts=_posts(paths, motor, sizes))  # fmt: skip
 
@@ -261,16 +261,9 @@ def _layers_at(layers: np.ndarray, index: dict, arms: tuple, p: int, joint: int)
     return [arm.layer for arm in arms if joint in arm.joints]
 
 
-def _gap(conflicts: Conflicts, layers: np.ndarray, sizes: Sizes) -> float:
-    """The least in-plane gap between the outlines of two parts on one layer."""
-    same = (layers[:, None] == layers[None, :]) & ~np.eye(len(layers), dtype=bool)
-    same &= (layers[:, None] > 0) & (layers[None, :] > 0)  # the ground, and an arm not used
-    return float((conflicts.distance[same] - sizes.link_width).min(initial=np.inf))
-
-
 def _posts(paths: np.ndarray, motor: int, sizes: Sizes) -> tuple[tuple[float, float], ...]:
-    """POSTS points round the motor's pivot, POST_MARGIN link widths beyond its farthest
-    point swept by any joint."""
+    """POSTS points round the motor's pivot, as far beyond its farthest point swept by any
+    joint as a bracket's post is (`braced.POST_MARGIN` link widths)."""
     centre = paths[motor, 0]
     reach = np.linalg.norm(paths - centre, axis=-1).max() + POST_MARGIN * sizes.link_width
     angles = np.pi / 2 + 2 * np.pi * np.arange(POSTS) / POSTS

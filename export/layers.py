@@ -326,10 +326,14 @@ def _layout(assembly, conflicts, sizes, moving_layers, cover, stack, minimal) ->
         spans.append((0, low[-1]))
         if high:
             stubs[k] = (high[0], top_layer)
-    n = len(layers)
-    same = (layers[:, None] == layers[None, :]) & ~np.eye(n, dtype=bool)
-    same[0], same[:, 0] = False, False
-    gap = (conflicts.distance[same] - sizes.link_width).min(initial=np.inf)
     count = stack + 1 + bool(top or stubs)
-    return Layout(layers, spans, tuple(sorted(top)), count, float(gap), minimal,
-                  cover_stubs=stubs)  # fmt: skip
+    return Layout(layers, spans, tuple(sorted(top)), count, least_gap(conflicts, layers, sizes),
+                  minimal, cover_stubs=stubs)  # fmt: skip
+
+
+def least_gap(conflicts: Conflicts, layers: np.ndarray, sizes: Sizes) -> float:
+    """The least in-plane gap between the outlines of two parts on one layer (inf if none);
+    what is on layer 0 (the ground, or a candidate left out) is not counted."""
+    same = (layers[:, None] == layers[None, :]) & ~np.eye(len(layers), dtype=bool)
+    same &= (layers[:, None] > 0) & (layers[None, :] > 0)
+    return float((conflicts.distance[same] - sizes.link_width).min(initial=np.inf))
