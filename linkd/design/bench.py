@@ -39,7 +39,6 @@ from .propose import Proposer
 from .search import search_width
 from .select import end_effector_path, sampling_floor
 
-SETUPS = ("plain", "user", "constrained", "no-motor")
 USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])
 
 

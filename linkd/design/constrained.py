@@ -2,7 +2,6 @@
 the final check already meets them and stays accurate.
 
 Everything here works in the target's normalised frame, on constraints mapped into it:
-- `prune`: candidates with more joints than allowed never reach alignment;
 - `pin`: with a motor point, each placed candidate is moved by the similarity that best fits its
   path to the target among those that map its crank pivot exactly onto the motor point (the
   translation follows from rotation and scale, which stay free, fitted by ICP about the point;
@@ -38,13 +37,6 @@ EXTRA_DEGREES = (0.5, 4.0)  # the same for the transmission angle: hard and soft
 LINK_FACTOR = 1.02  # hard limit on link length, times the shortest allowed
 PIN_POINTS, PIN_STEPS = 64, 10  # points per curve and ICP steps of the pinned fit
 RANK_WEIGHT = 0.5  # weight of the constraint violation beside the Chamfer distance in `rank`
-
-
-def prune(batch: LinkageBatch, max_joints: int | None) -> LinkageBatch:
-    """The linkages of `batch` with at most `max_joints` joints."""
-    if max_joints is None:
-        return batch
-    return batch.subset(np.flatnonzero(batch.valid.sum(1) <= max_joints))
 
 
 def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
