@@ -245,6 +245,22 @@ def ordered_distance(a: np.ndarray, b: np.ndarray, allow_reverse: bool = True) -
     return cyclic_match(a, b, allow_reverse)[2]
 
 
+def ordered_distance_batch(
+    a: torch.Tensor, b: torch.Tensor, allow_reverse: bool = True
+) -> torch.Tensor:
+    """`ordered_distance` for a (B, n, 2) against b (B, n, 2) or (n, 2): (B,), differentiable."""
+    import torch
+
+    n = a.shape[-2]
+    d = torch.cdist(a, b.expand(a.shape), compute_mode=_EXACT)  # (B, n, n)
+    shifted = (torch.arange(n, device=a.device)[:, None] + torch.arange(n, device=a.device)) % n
+    index = shifted.expand(a.shape[0], n, n)  # [i, k] -> column (i + k) % n
+    costs = d.gather(2, index).mean(1)  # (B, shifts)
+    if allow_reverse:
+        costs = torch.cat([costs, d.flip(2).gather(2, index).mean(1)], dim=1)
+    return costs.amin(1)
+
+
 def _shift_costs_numpy(d: np.ndarray) -> np.ndarray:
     n = len(d)
     shifted = (np.arange(n)[:, None] + np.arange(n)) % n

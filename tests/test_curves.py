@@ -17,6 +17,7 @@ from linkd.curves import (
     cyclic_match,
     normalise,
     ordered_distance,
+    ordered_distance_batch,
     read_curve,
     resample,
     write_curve,
@@ -246,3 +247,14 @@ def test_ordered_distance_finds_the_shift_and_direction(seed, shift, reverse):
     np.testing.assert_allclose(np.roll(b_dash, -found_shift, axis=0), a, atol=1e-12)
     if reverse:
         assert ordered_distance(a, b, allow_reverse=False) > 0.01
+
+
+def test_ordered_distance_batch_matches_numpy():
+    a = np.stack([resample(_cloud(s, 9), 50) for s in range(4)])
+    b = np.stack([np.roll(resample(_cloud(s + 10, 9), 50), 7, axis=0) for s in range(4)])
+    for allow_reverse in (True, False):
+        expected = [ordered_distance(x, y, allow_reverse) for x, y in zip(a, b)]
+        got = ordered_distance_batch(torch.tensor(a), torch.tensor(b), allow_reverse)
+        np.testing.assert_allclose(got.numpy(), expected, rtol=1e-9)
+    one = ordered_distance_batch(torch.tensor(a), torch.tensor(a[0]))
+    assert one[0].item() == pytest.approx(0.0, abs=1e-12) and (one[1:] > 0).all()

@@ -12,6 +12,7 @@ import pytest
 import trimesh
 
 from linkd.classic import jansen_leg, jansen_walker
+from linkd.commands.export import _counts
 from linkd.export import export_mechanism
 from linkd.export.framed import framed_layers
 from linkd.export.layers import sweep
@@ -89,6 +90,13 @@ def test_three_mirrored_pairs_are_built_between_frames_and_verified(three_pairs)
         assert trimesh.load(out / parts[name]["mesh"]).is_watertight
     report = verify_output(out, write=False)
     assert report.passed, report.failed
+
+
+def test_the_export_summary_counts_the_cranks_arms_as_arms(three_pairs):
+    _, result = three_pairs
+    counts = _counts(result.parts)  # the crank's five arms, not five more plates
+    assert counts["arm"] == 5 and sum(counts.values()) == len(result.parts)
+    assert counts["plate"] == 12  # the legs' own: two ternary plates in each of the six
 
 
 def test_a_frame_moved_into_a_module_is_caught(three_pairs, tmp_path):

@@ -143,10 +143,12 @@ def _extras(mech: Mechanism, stage: Path) -> dict[str, float]:
 
 
 def _counts(parts: list[dict]) -> dict[str, int]:
-    """Number of parts of each kind (ground, link, plate, pin)."""
+    """Number of pieces of each kind (ground, link, plate, arm, sheave, pin, post): an arm of a
+    split part counts as an arm, not as another link or plate."""
     counts: dict[str, int] = {}
     for part in parts:
-        counts[part["kind"]] = counts.get(part["kind"], 0) + 1
+        kind = "arm" if "arm_of" in part else part["kind"]
+        counts[kind] = counts.get(kind, 0) + 1
     return counts
 
 
