@@ -142,7 +142,8 @@ def _layered(
     leave room: the width, and the sizes derived from it, shrink by the NARROWER factors. Where
     no width does, binary links bend around the pins in their way (`routing`), at each width,
     then modules on one crank are stacked between frames (`framed`; where they build it, the
-    first QUICK_STRAPS strap choices may still do with fewer layers), then parts turn on
+    first QUICK_STRAPS strap choices, at the frames' width or wider, may still do with fewer
+    layers), then parts turn on
     sheaves as eccentric straps (`strapped`), and then plates are cut into
     arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
     `options.brackets` is off), then a part forks; those two are SCREENED. Widths the user gave
@@ -176,7 +177,10 @@ def _layered(
         build = partial(layering, searches=QUICK_STRAPS) if framed else layering
         screened = layering in SCREENED and len(tries) > 2
         fallback = None  # a screened construction's layout at the narrowest width
-        for size in [tries[0], tries[-1], *tries[1:-1]] if screened else tries:
+        widths = [tries[0], tries[-1], *tries[1:-1]] if screened else tries
+        if framed is not None:  # the straps no narrower than the frames: wider parts come first
+            widths = tries[: tries.index(framed[0]) + 1]
+        for size in widths:
             fraction = size.link_width / sizes.link_width
             width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
             progress(f"layering {CONSTRUCTIONS[layering]} at {width}")

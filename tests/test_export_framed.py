@@ -1,6 +1,8 @@
 """Frames between modules (linkd.export.framed) against the straps: where both build a
-mechanism, the one with fewer layers is kept (the walkers themselves: tests/test_walkers.py)."""
+mechanism, the one with fewer layers is kept, the straps never with narrower parts than the
+frames' (the walkers themselves: tests/test_walkers.py)."""
 
+from linkd.classic import jansen_walker
 from linkd.export import export_mechanism
 from linkd.export.framed import framed_layers, modular
 from linkd.export.layers import sweep
@@ -31,3 +33,13 @@ def test_frames_give_way_to_straps_with_fewer_layers(tmp_path):
     assert result.layers == strapped.count
     assert any(part["kind"] == "sheave" for part in result.parts)
     assert not any("_frame" in part["name"] for part in result.parts)
+
+
+def test_straps_are_not_tried_narrower_than_the_frames(tmp_path):
+    tried = []
+    result = export_mechanism(jansen_walker(3, mirrored=False), tmp_path, {"mjcf"},
+                              progress=tried.append)  # fmt: skip
+    assert any(part["name"].startswith("ground_frame") for part in result.parts)
+    assert result.narrowed == 1.0
+    straps = [step for step in tried if "eccentric straps" in step]
+    assert straps == ["layering eccentric straps at the usual width"]
