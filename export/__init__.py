@@ -143,12 +143,12 @@ def _layered(
     no width does, binary links bend around the pins in their way (`routing`), at each width,
     then modules on one crank are stacked between frames (`framed`; where they build it, the
     first QUICK_STRAPS strap choices, at the frames' width or wider, may still do with fewer
-    layers), then parts turn on
-    sheaves as eccentric straps (`strapped`), and then plates are cut into
-    arms and ground pins are held by brackets or as stubs from both plates (`braced`, unless
-    `options.brackets` is off), then a part forks; those two are SCREENED. Widths the user gave
-    are kept (the other constructions are still tried; ValueError when nothing works). quick:
-    straight links at the first width only. `progress` is told each construction and width."""
+    layers), then parts turn on sheaves as eccentric straps (`strapped`), and then plates are
+    cut into arms and ground pins are held by brackets or as stubs from both plates
+    (`braced`, unless `options.brackets` is off), then a part forks; those two are SCREENED.
+    Widths the user gave are kept (the other constructions are still tried; ValueError when
+    nothing works). quick: straight links at the first width only. `progress` is told each
+    construction and width."""
     sizes = resolve_sizes(mech, assembly.parts, options)
     tries = [sizes]
     if options.link_width is None and not quick:
