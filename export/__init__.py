@@ -174,13 +174,13 @@ def _layered(
     for layering in layerings:
         if framed is not None and layering is not strapped_layers:
             return framed
-        build = partial(layering, searches=QUICK_STRAPS) if framed else layering
-        screened = layering in SCREENED and len(tries) > 2
+        build, screened = layering, layering in SCREENED and len(tries) > 2
+        order = [tries[0], tries[-1], *tries[1:-1]] if screened else tries
+        if framed is not None:  # the straps, briefly and no narrower than the frames
+            build = partial(layering, searches=QUICK_STRAPS)
+            order = tries[: tries.index(framed[0]) + 1]
         fallback = None  # a screened construction's layout at the narrowest width
-        widths = [tries[0], tries[-1], *tries[1:-1]] if screened else tries
-        if framed is not None:  # the straps no narrower than the frames: wider parts come first
-            widths = tries[: tries.index(framed[0]) + 1]
-        for size in widths:
+        for size in order:
             fraction = size.link_width / sizes.link_width
             width = "the usual width" if fraction == 1 else f"{fraction:g} of the usual width"
             progress(f"layering {CONSTRUCTIONS[layering]} at {width}")
@@ -212,8 +212,8 @@ def _layered(
         why = why_refused(assembly, conflicts, narrowest)
         if why:
             culprits = f"; with straight parts, {why} alone cannot all be kept clear"
-    framed = ", framed" if framed_layers in layerings else ""
-    tried = f"straight, bent{framed}, strapped, split and forked parts{widths} tried{culprits}"
+    frames = ", framed" if framed_layers in layerings else ""
+    tried = f"straight, bent{frames}, strapped, split and forked parts{widths} tried{culprits}"
     raise ValueError(f"{first} ({tried})")
 
 
