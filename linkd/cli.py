@@ -13,10 +13,10 @@ import pkgutil
 import signal
 import sys
 import textwrap
-import threading
 
 from linkd import __version__
 from linkd.errors import InputError
+from linkd.termination import Terminated, sigterm_raises
 
 EPILOG = """\
 start here:
@@ -76,21 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (a CI job's timeout, `kill`), raised where the program is, so that it cleans up
-    as on Ctrl-C: no half-written output folder, no playback server left running."""
-
-
-def _terminate(signum: int, frame: object) -> None:
-    raise Terminated
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    here = threading.current_thread() is threading.main_thread()
-    before = signal.signal(signal.SIGTERM, _terminate) if here else None
     try:
-        return int(args.run(args) or 0)
+        with sigterm_raises():
+            return int(args.run(args) or 0)
     except InputError as exc:
         print(f"linkd: error: {exc}", file=sys.stderr)
         return 2
@@ -103,9 +93,6 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (`| head`): the rest goes nowhere, quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 128 + signal.SIGPIPE
-    finally:
-        if here:
-            signal.signal(signal.SIGTERM, before)
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import IO
 
 from linkd.errors import InputError
+from linkd.termination import check
 
 MARKER = "mechanism.json"  # a folder holding this is a linkd output and may be replaced
 OUTPUTS = frozenset({MARKER, "mechanism.xml", "scene.xml", "meshes", "animation.html",
@@ -74,6 +75,7 @@ def staged_output(
         _hold(signal.SIG_UNBLOCK)  # one that came meanwhile is raised here, and cleaned up
         os.chmod(staging, 0o777 & ~_umask())  # mkdtemp makes it private: make it ordinary
         yield staging
+        check()  # a termination the run swallowed on its way: nothing is put in place
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         _remove(made)

@@ -111,6 +111,29 @@ def test_a_terminated_design_leaves_nothing_behind(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_termination_swallowed_on_the_way_still_ends_the_run(tmp_path, capsys):
+    """Raised inside a finaliser (as the garbage collector may run one anywhere), Terminated is
+    swallowed; the run still ends at its next stage, or before its output is put in place."""
+    import signal
+
+    from linkd.design.stages import Stages
+    from linkd.outdir import staged_output
+    from linkd.termination import Terminated, on_sigterm, sigterm_raises
+
+    class Finaliser:
+        def __del__(self):
+            on_sigterm(signal.SIGTERM, None)
+
+    with sigterm_raises():
+        with pytest.raises(Terminated), staged_output(tmp_path / "out") as stage:
+            Finaliser()  # collected at once: the handler's Terminated goes nowhere
+            (stage / "mechanism.json").write_text("{}")  # and the run goes on
+        with pytest.raises(Terminated), Stages(show=False).stage("next", "the next stage"):
+            pass
+    assert list(tmp_path.iterdir()) == []
+    assert "Terminated" not in capsys.readouterr().err  # not reported as an ignored exception
+
+
 def test_the_one_shot_setting_is_the_models_single_sample_alone(tmp_path):
     """CONTRACT §5: no atlas path or sub-mechanism stands in for an invalid sample (today seeds
     0-3 are invalid on this curve and exit 1, seed 4 is delivered)."""

@@ -33,17 +33,15 @@ def test_the_second_part_runs_in_another_process_and_results_keep_their_order():
 
 @needs_fork
 def test_a_child_dies_silently_when_the_parent_ends_it():
-    """The command line turns SIGTERM into a clean-up in the parent (`linkd.cli`); the child,
-    which the parent ends with SIGTERM once its result is in, must not inherit that."""
+    """The command line turns SIGTERM into a clean-up in the parent (`linkd.termination`);
+    the child, which the parent ends with SIGTERM once its result is in, must not inherit
+    that."""
     import signal
 
-    from linkd import cli
+    from linkd.termination import sigterm_raises
 
-    before = signal.signal(signal.SIGTERM, cli._terminate)
-    try:
+    with sigterm_raises():
         handler = run_parts([os.getpid, lambda: signal.getsignal(signal.SIGTERM)])[1]
-    finally:
-        signal.signal(signal.SIGTERM, before)
     assert handler == signal.SIG_DFL
 
 

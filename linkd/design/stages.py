@@ -13,6 +13,8 @@ import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
 
+from linkd.termination import check
+
 
 class Stages:
     """Times named stages; shows them on a terminal when `show` (default: stdout is one)."""
@@ -28,7 +30,9 @@ class Stages:
 
     @contextmanager
     def stage(self, name: str, label: str) -> Iterator[Callable[[str], None]]:
-        """Run a stage; the block may call the yielded function to say what the stage found."""
+        """Run a stage; the block may call the yielded function to say what the stage found.
+        A termination the run swallowed on its way ends it here (`termination.check`)."""
+        check()
         notes: list[str] = []
         start = time.perf_counter()
         spinner = self.console.status(label) if self.console else nullcontext()
