@@ -3,6 +3,7 @@ a constrained design run (candidates from the random generator, as in test_desig
 
 import argparse
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -12,9 +13,9 @@ from linkd.batch import LinkageBatch
 from linkd.cli import main
 from linkd.constraints import Box, Constraints, check, measure_batch
 from linkd.curves import read_curve, resample, write_curve
-from linkd.design.constrained import screen
+from linkd.design.constrained import SOFT, pin, pinned, screen
 from linkd.design.pipeline import DesignOptions, design
-from linkd.design.propose import sub_mechanisms
+from linkd.design.propose import Candidates, sub_mechanisms
 from linkd.design.refine import RefineSettings
 from linkd.design.select import curve_error, end_effector_path
 from linkd.export import export_mechanism
@@ -253,3 +254,23 @@ def test_the_screen_leaves_a_pivot_off_the_motor_point_where_it_is():
     feasible, measured = screen(batch, Similarity(), Constraints(motor_at=(0.0, 0.0)))
     assert feasible.tolist() == [True, False]
     assert measured["motor_at"][1][1] == pytest.approx(-0.5 * np.sqrt(2))
+
+
+def test_a_ground_box_alone_pins_each_crank_pivot_outside_it_at_its_nearest_point():
+    """Without a motor point, placement moves each crank pivot that lies outside the ground box
+    to the box's nearest point (SOFT inside), the rest of its mechanism turned and scaled about
+    it to fit the path; a candidate whose pivot is inside stays as placed."""
+    mech = classic.crank_rocker()
+    path = end_effector_path(mech, 200)[0]
+    away = mech.replace(positions=mech.positions + np.array([3.0, 0.0]))
+    batch = LinkageBatch.from_mechanisms([away, mech])
+    pivot = mech.positions[0]
+    box = Box(*(pivot - 1), *(pivot + 1))
+    placed = Candidates(batch, np.array([0.5, 0.0]), source=np.arange(2))
+    moved = pinned(placed, Constraints(ground_box=box), partial(pin, target=path))
+    assert moved.source.tolist() == [1, 0]
+    assert np.array_equal(moved.batch.positions[0], mech.positions)  # as placed
+    assert moved.batch.positions[1, 0].tolist() == [box.x1 - SOFT, pivot[1]]  # exactly there
+    assert moved.chamfer[1] < 0.5  # fitted about it
+    unpinned = pinned(placed, Constraints(min_link=0.1), partial(pin, target=path))
+    assert unpinned is placed

@@ -5,7 +5,9 @@ Everything here works in the target's normalised frame, on constraints mapped in
 - `pin`: with a motor point, each placed candidate is moved by the similarity that best fits its
   path to the target among those that map its crank pivot exactly onto the motor point (the
   translation follows from rotation and scale, which stay free, fitted by ICP about the point;
-  `pin_stroke` the same for an open or timed path, over each candidate's crank range);
+  `pin_stroke` the same for an open or timed path, over each candidate's crank range); with a
+  ground box but no motor point, those whose crank pivot is outside it at the box's nearest
+  point (`pinned`);
 - `rank`: candidates that nearly meet the constraints already go first, so they are refined;
 - `Barriers`: refinement terms keeping fixed joints in the ground box and every joint in the
   envelope over the cycle (soft quadratic penalties, with hard limits on the kept iterate), and
@@ -15,6 +17,7 @@ Everything here works in the target's normalised frame, on constraints mapped in
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -26,7 +29,7 @@ from linkd.curves import chamfer_batch
 from linkd.geometry import Similarity
 from linkd.validator import validate
 
-from .propose import Candidates
+from .propose import Candidates, joined
 from .refine import RefineSettings, resample_closed
 from .stroke import Goal, stroke_scores, strokes
 
@@ -39,19 +42,59 @@ PIN_POINTS, PIN_STEPS = 64, 10  # points per curve and ICP steps of the pinned f
 RANK_WEIGHT = 0.5  # weight of the constraint violation beside the Chamfer distance in `rank`
 
 
+def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidates:
+    """Placed candidates as the constraints pin them (`pin_at(candidates, motor=points)`: `pin`
+    or `pin_stroke`, onto (B, 2) points): with a motor point, each crank pivot moved onto it;
+    with a ground box alone, each pivot outside the box (or within SOFT of its sides) moved to
+    the nearest point SOFT inside it, so that refinement starts with the pivot where it may
+    stay (pulling it in by the barrier alone bends the path away: LInK-Bench random/006 0.10
+    against 0.002); else as they are."""
+    if len(candidates) == 0 or (c.motor_at is None and c.ground_box is None):
+        return candidates
+    pivots = candidates.batch.positions[:, 0]
+    if c.motor_at is not None:
+        return pin_at(candidates, motor=np.tile(np.asarray(c.motor_at, float), (len(pivots), 1)))
+    box = c.ground_box
+    corners = np.array([[box.x0, box.y0], [box.x1, box.y1]])
+    middle = corners.mean(0)  # a box under 2 SOFT across pins at its middle
+    inside = np.clip(pivots, np.minimum(corners[0] + SOFT, middle),
+                     np.maximum(corners[1] - SOFT, middle))  # fmt: skip
+    out = (inside != pivots).any(1)
+    if not out.any():
+        return candidates
+    both = [
+        _subset(candidates, np.flatnonzero(~out)),
+        pin_at(_subset(candidates, np.flatnonzero(out)), motor=inside[out]),
+    ]
+    ranges = None if candidates.ranges is None else np.concatenate([x.ranges for x in both])
+    return Candidates(joined([x.batch for x in both]),
+                      *(np.concatenate([getattr(x, f) for x in both])
+                        for f in ("chamfer", "source", "refined")), ranges)  # fmt: skip
+
+
+def _subset(candidates: Candidates, rows: np.ndarray) -> Candidates:
+    ranges = None if candidates.ranges is None else candidates.ranges[rows]
+    return Candidates(candidates.batch.subset(rows), candidates.chamfer[rows],
+                      candidates.source[rows], candidates.refined[rows], ranges)  # fmt: skip
+
+
 def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
-    """Re-place placed candidates so that each crank pivot lies exactly on `motor`, with the
-    rotation and scale about it that fit the path best; sorted by the new Chamfer distance."""
+    """Re-place placed candidates so that each crank pivot lies exactly on its motor point
+    (`motor`: (2,) for all or (B, 2), one each), with the rotation and scale about it that fit
+    the path best; sorted by the new Chamfer distance."""
     batch = candidates.batch
     if len(batch) == 0:
         return candidates
+    motor = np.array(np.broadcast_to(np.asarray(motor, float), (len(batch), 2)))
     result = validate(batch, keep_motion=True)
     paths = torch.as_tensor(result.end_effector_paths(batch), dtype=torch.float64)
     pivot = torch.as_tensor(batch.positions[:, 0])
-    goal = torch.as_tensor(target, dtype=torch.float64) - torch.as_tensor(motor)
+    goal = (
+        torch.as_tensor(target, dtype=torch.float64)[None] - torch.as_tensor(motor)[:, None]
+    )  # (B, n, 2): about each motor point
     even = resample_closed(paths, len(target)) - pivot[:, None]  # about the pivot
     every = max(1, len(target) // PIN_POINTS)
-    u, v = even[:, ::every].float(), goal[::every].float()
+    u, v = even[:, ::every].float(), goal[:, ::every].float()
     factor = torch.zeros(len(batch), 2)
     factor[:, 0] = 1  # (scale cos, scale sin): a pure translation to begin with
     for _ in range(PIN_STEPS):
@@ -65,15 +108,16 @@ def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candid
 
 
 def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candidates:
-    """`pin` for placed strokes: the scale and rotation about the motor point that best map
+    """`pin` for placed strokes: the scale and rotation about the motor points that best map
     each end effector's path over its crank range onto the goal, point to point in order (least
     squares, in closed form), then on a path not timed by ICP; sorted by the new score."""
     batch = candidates.batch
     if len(batch) == 0:
         return candidates
+    motor = np.array(np.broadcast_to(np.asarray(motor, float), (len(batch), 2)))
     paths, _ = strokes(batch, candidates.ranges, goal, PIN_POINTS)
     pivot = torch.as_tensor(batch.positions[:, 0])
-    goal_points = torch.as_tensor(goal.samples(PIN_POINTS)) - torch.as_tensor(motor)
+    goal_points = torch.as_tensor(goal.samples(PIN_POINTS))[None] - torch.as_tensor(motor)[:, None]
     u = torch.view_as_complex((paths - pivot[:, None]).contiguous())
     v = torch.view_as_complex(goal_points.contiguous())
     z = (u.conj() * v).sum(1) / (u.abs() ** 2).sum(1)
@@ -90,9 +134,9 @@ def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candida
 
 def _about(batch: LinkageBatch, factor: torch.Tensor, motor: np.ndarray) -> LinkageBatch:
     """The linkages scaled and turned about their crank pivots by `factor` (B, 2), each pivot
-    then exactly on `motor`."""
+    then exactly on its motor point (`motor`: (B, 2))."""
     rel = torch.as_tensor(batch.positions - batch.positions[:, :1])
-    moved = _turn(rel, factor).numpy() + np.asarray(motor)
+    moved = _turn(rel, factor).numpy() + motor[:, None]
     moved[:, 0] = motor  # exactly
     return LinkageBatch(moved, batch.fixed, batch.valid, batch.adjacency, batch.end_effector)
 
@@ -106,12 +150,12 @@ def _turn(points: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
 
 def _fit_about_origin(u: torch.Tensor, v: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
     """One ICP step: the scale and rotation about the origin, as (s cos, s sin) (B, 2), that
-    best map the points u (B, k, 2) onto v (m, 2) when each point is paired with its nearest
+    best map the points u (B, k, 2) onto v (B, m, 2) when each point is paired with its nearest
     on the other curve, both ways (least squares, in closed form)."""
-    d = torch.cdist(_turn(u, factor), v[None].expand(len(u), -1, -1))  # (B, k, m)
-    to_v = v[d.argmin(2)]  # (B, k, 2) partners of u's points
+    d = torch.cdist(_turn(u, factor), v)  # (B, k, m)
+    to_v = v.gather(1, d.argmin(2)[..., None].expand(-1, -1, 2))  # (B, k, 2) partners of u's
     to_u = u.gather(1, d.argmin(1)[..., None].expand(-1, -1, 2))  # (B, m, 2) of v's points
-    src, dst = torch.cat([u, to_u], 1), torch.cat([to_v, v[None].expand(len(u), -1, -1)], 1)
+    src, dst = torch.cat([u, to_u], 1), torch.cat([to_v, v], 1)
     dot = (src * dst).sum((1, 2))
     cross = (src[..., 0] * dst[..., 1] - src[..., 1] * dst[..., 0]).sum(1)
     new = torch.stack([dot, cross], 1) / (src**2).sum((1, 2)).clamp_min(1e-30)[:, None]
@@ -119,8 +163,8 @@ def _fit_about_origin(u: torch.Tensor, v: torch.Tensor, factor: torch.Tensor) ->
 
 
 def _chamfer(a: torch.Tensor, b: torch.Tensor, chunk: int = 64) -> torch.Tensor:
-    """(B,) Chamfer distance of a (B, n, 2) to b (m, 2), in chunks that bound the memory."""
-    return torch.cat([chamfer_batch(part, b) for part in a.split(chunk)])
+    """(B,) Chamfer distance of a (B, n, 2) to b (B, m, 2), in chunks that bound the memory."""
+    return torch.cat([chamfer_batch(p, q) for p, q in zip(a.split(chunk), b.split(chunk))])
 
 
 def violation(batch: LinkageBatch, c: Constraints) -> np.ndarray:

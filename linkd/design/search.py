@@ -27,7 +27,7 @@ from linkd.validator import validate
 
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
-from .constrained import pin, pin_stroke, rank, tightened
+from .constrained import pin, pin_stroke, pinned, rank, tightened
 from .parallel import PARTS, run_parts, split
 from .polish import polish
 from .propose import (
@@ -231,10 +231,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
             candidates = place_stroke(batch, goal)
         else:
             candidates = place(batch, target, source)
-        if inner.motor_at is not None:
-            motor = np.array(inner.motor_at)
-            candidates = (pin_stroke(candidates, goal, motor) if stroke
-                          else pin(candidates, target, motor))  # fmt: skip
+        candidates = pinned(candidates, inner, (partial(pin_stroke, goal=goal) if stroke
+                                                else partial(pin, target=target)))  # fmt: skip
         if inner:
             candidates = rank(candidates, inner)
         report["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
@@ -285,8 +283,7 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                     note("no design that can be built to search around")
                     break
                 found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
-                if inner.motor_at is not None:  # placed anew: pinned anew
-                    found = pin(found, target, np.array(inner.motor_at))
+                found = pinned(found, inner, partial(pin, target=target))  # placed anew
                 if inner:
                     found = rank(found, inner)
                 first = len(candidates)
