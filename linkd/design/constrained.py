@@ -47,8 +47,8 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
     or `pin_stroke`, onto (B, 2) points): with a motor point, each crank pivot moved onto it;
     with a ground box alone, each pivot outside the box (or within SOFT of its sides) moved to
     the nearest point SOFT inside it, so that refinement starts with the pivot where it may
-    stay (pulling it in by the barrier alone bends the path away: LInK-Bench random/006 0.10
-    against 0.002); else as they are."""
+    stay (pulled in by the barrier alone, it bends the path away: on LInK-Bench random/006 with
+    the box alone, 0.10 against 0.002 to 0.02); else as they are."""
     if len(candidates) == 0 or (c.motor_at is None and c.ground_box is None):
         return candidates
     pivots = candidates.batch.positions[:, 0]
@@ -73,6 +73,7 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
 
 
 def _subset(candidates: Candidates, rows: np.ndarray) -> Candidates:
+    """The candidates `rows`, each with its error, source, refinement and crank range."""
     ranges = None if candidates.ranges is None else candidates.ranges[rows]
     return Candidates(candidates.batch.subset(rows), candidates.chamfer[rows],
                       candidates.source[rows], candidates.refined[rows], ranges)  # fmt: skip
