@@ -29,7 +29,7 @@ from linkd.curves import chamfer_batch
 from linkd.geometry import Similarity
 from linkd.validator import validate
 
-from .propose import Candidates, joined
+from .propose import Candidates, merged
 from .refine import RefineSettings, resample_closed
 from .stroke import Goal, stroke_scores, strokes
 
@@ -62,21 +62,9 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
     out = (inside != pivots).any(1)
     if not out.any():
         return candidates
-    both = [
-        _subset(candidates, np.flatnonzero(~out)),
-        pin_at(_subset(candidates, np.flatnonzero(out)), motor=inside[out]),
-    ]
-    ranges = None if candidates.ranges is None else np.concatenate([x.ranges for x in both])
-    return Candidates(joined([x.batch for x in both]),
-                      *(np.concatenate([getattr(x, f) for x in both])
-                        for f in ("chamfer", "source", "refined")), ranges)  # fmt: skip
-
-
-def _subset(candidates: Candidates, rows: np.ndarray) -> Candidates:
-    """The candidates `rows`, each with its error, source, refinement and crank range."""
-    ranges = None if candidates.ranges is None else candidates.ranges[rows]
-    return Candidates(candidates.batch.subset(rows), candidates.chamfer[rows],
-                      candidates.source[rows], candidates.refined[rows], ranges)  # fmt: skip
+    rows = np.flatnonzero(out)
+    moved = pin_at(candidates.subset(rows), motor=inside[rows])
+    return merged(candidates.subset(np.flatnonzero(~out)), moved)
 
 
 def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
@@ -185,9 +173,7 @@ def rank(candidates: Candidates, c: Constraints) -> Candidates:
         return candidates
     score = candidates.chamfer + RANK_WEIGHT * violation(candidates.batch, c)
     order = np.argsort(score, kind="stable")
-    ranges = None if candidates.ranges is None else candidates.ranges[order]
-    return Candidates(candidates.batch.subset(order), candidates.chamfer[order],
-                      candidates.source[order], candidates.refined[order], ranges)  # fmt: skip
+    return candidates.subset(order)
 
 
 def tightened(settings: RefineSettings, c: Constraints) -> RefineSettings:

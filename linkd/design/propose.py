@@ -49,13 +49,23 @@ class Candidates:
     def __len__(self) -> int:
         return len(self.chamfer)
 
+    def subset(self, rows: np.ndarray) -> Candidates:
+        """The candidates `rows`, each with its error, source, refinement and crank range."""
+        ranges = None if self.ranges is None else self.ranges[rows]
+        return Candidates(self.batch.subset(rows), self.chamfer[rows], self.source[rows],
+                          self.refined[rows], ranges)  # fmt: skip
+
 
 def merged(first: Candidates, second: Candidates) -> Candidates:
-    """The candidates of both, first's then second's (not re-sorted)."""
+    """The candidates of both, first's then second's (not re-sorted); crank ranges where both
+    have them."""
+    both = (first, second)
+    ranges = None
+    if first.ranges is not None and second.ranges is not None:
+        ranges = np.concatenate([first.ranges, second.ranges])
     return Candidates(joined([first.batch, second.batch]),
-                      np.concatenate([first.chamfer, second.chamfer]),
-                      np.concatenate([first.source, second.source]),
-                      np.concatenate([first.refined, second.refined]))  # fmt: skip
+                      *(np.concatenate([getattr(x, f) for x in both])
+                        for f in ("chamfer", "source", "refined")), ranges)  # fmt: skip
 
 
 SOURCES = ("model", "atlas", "round 2")  # the proposer, the atlas, the search around the best
