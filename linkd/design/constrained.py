@@ -51,9 +51,11 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
     the box alone, 0.10 against 0.002 to 0.02); else as they are."""
     if len(candidates) == 0 or (c.motor_at is None and c.ground_box is None):
         return candidates
-    pivots = candidates.batch.positions[:, 0]
     if c.motor_at is not None:
-        return pin_at(candidates, motor=np.tile(np.asarray(c.motor_at, float), (len(pivots), 1)))
+        return pin_at(
+            candidates, motor=np.tile(np.asarray(c.motor_at, float), (len(candidates), 1))
+        )
+    pivots = candidates.batch.positions[:, 0]
     box = c.ground_box
     corners = np.array([[box.x0, box.y0], [box.x1, box.y1]])
     middle = corners.mean(0)  # a box under 2 SOFT across pins at its middle
@@ -69,12 +71,11 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
 
 def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
     """Re-place placed candidates so that each crank pivot lies exactly on its motor point
-    (`motor`: (2,) for all or (B, 2), one each), with the rotation and scale about it that fit
-    the path best; sorted by the new Chamfer distance."""
+    (`motor`: (B, 2)), with the rotation and scale about it that fit the path best; sorted by
+    the new Chamfer distance."""
     batch = candidates.batch
     if len(batch) == 0:
         return candidates
-    motor = np.array(np.broadcast_to(np.asarray(motor, float), (len(batch), 2)))
     result = validate(batch, keep_motion=True)
     paths = torch.as_tensor(result.end_effector_paths(batch), dtype=torch.float64)
     pivot = torch.as_tensor(batch.positions[:, 0])
@@ -103,7 +104,6 @@ def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candida
     batch = candidates.batch
     if len(batch) == 0:
         return candidates
-    motor = np.array(np.broadcast_to(np.asarray(motor, float), (len(batch), 2)))
     paths, _ = strokes(batch, candidates.ranges, goal, PIN_POINTS)
     pivot = torch.as_tensor(batch.positions[:, 0])
     goal_points = torch.as_tensor(goal.samples(PIN_POINTS))[None] - torch.as_tensor(motor)[:, None]
