@@ -87,8 +87,9 @@ def test_crank_range_in_mechanism_json(tmp_path):
 
 
 def options(**changes) -> DesignOptions:
+    # One round: later rounds have their own test.
     settings = dict(candidates=12, time_budget=600, refine_settings=QUICK, formats={"mjcf"},
-                    every_joint=False)  # fmt: skip
+                    every_joint=False, rounds=1)  # fmt: skip
     return DesignOptions(**{**settings, **changes})
 
 
@@ -147,6 +148,18 @@ def test_timing_of_a_known_closed_path_is_recovered(pool, tmp_path):
     points = np.loadtxt(file, delimiter=",", skiprows=1)
     uneven = timing_of(outcome.design.mechanism, resample(points, rows))
     assert uneven > 10 * report["design"]["timing_error"]
+
+
+def test_a_stroke_is_searched_around_in_later_rounds(pool, tmp_path):
+    """Later rounds grow a stroke's best designs as they grow a loop's, each copy placed on the
+    stroke by its own best sub-arc, and refine the best of them."""
+    file = stroke_file(pool, tmp_path, 2.0, 4.0, 60, "s.csv")
+    outcome = design(file, tmp_path / "grown", options(rounds=2), proposer=pool_proposer(pool),
+                     show=False)  # fmt: skip
+    search = outcome.report["search"]
+    assert search["rounds_run"] == 2 and outcome.design is not None
+    grown = search["sources"]["round 2"]
+    assert grown["placed"] > 0 and grown["refined"] > 0
 
 
 def test_bench_reports_open_strokes(pool, tmp_path):

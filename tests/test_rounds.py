@@ -6,9 +6,10 @@ from test_export_narrow import KNOTTED, SNARLED, TANGLED
 
 from linkd import classic
 from linkd.batch import LinkageBatch
+from linkd.design.budget import around_width, search_width
 from linkd.design.propose import Candidates
 from linkd.design.rounds import DYAD_SLACK, around, with_coupler_point, with_dyad
-from linkd.design.search import _buildable, around_width, search_width
+from linkd.design.search import _buildable
 from linkd.design.select import topology_key
 from linkd.export import buildable
 from linkd.mechanism import Mechanism
@@ -131,8 +132,9 @@ def test_a_longer_budget_searches_wider_unless_told():
     assert search_width(30, None, None) == (6, 1024, 48)  # the defaults
     assert search_width(120, None, None) == (30, 4096, 96)  # rounds until the deadline
     assert search_width(120, 1, 10, 4) == (1, 10, 4)
-    # An open or timed stroke has one round and refines three times as many designs in it.
-    assert search_width(30, None, None, stroke=True) == (1, 1024, 144)
-    assert search_width(30, 3, None, 20, stroke=True) == (1, 1024, 20)
+    # An open or timed stroke has fewer rounds, its first three times as wide.
+    assert search_width(30, None, None, stroke=True) == (3, 1024, 144)
+    assert search_width(120, None, None, stroke=True) == (27, 4096, 288)
+    assert search_width(30, 3, None, 20, stroke=True) == (3, 1024, 20)
     assert around_width(30, None) == 4 and around_width(120, None) == 16
     assert around_width(120, 2) == 2

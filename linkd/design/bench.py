@@ -33,10 +33,10 @@ from linkd.constraints import Box, Constraints, check
 from linkd.curves import read_curve, read_path, resample, write_curve
 from linkd.errors import InputError
 
+from .budget import search_width
 from .output import SKIP_REASONS
 from .pipeline import DesignOptions, design
 from .propose import Proposer
-from .search import search_width
 from .select import end_effector_path, sampling_floor
 
 USER_SCALE, USER_OFFSET = 100.0, np.array([500.0, 300.0])

@@ -3,8 +3,8 @@
 Candidates come from the proposer (LinkD, or the curve-blind generator) and from the atlas of
 precomputed mechanisms; each valid one offers its sub-mechanisms, is placed on the target by
 its best similarity (or, on an open or timed target, its best sub-arc of crank angles too),
-and the best few are refined, in rounds that grow the best so far by a joint on closed loops;
-on those, the best are refined once more at the end, their paths traced more finely.
+and the best few are refined, in rounds that grow the best so far by a joint; on drawn
+loops, the best are refined once more at the end, their paths traced more finely.
 The designer's constraints (in the target's normalised frame) prune, pin, rank and bound the
 candidates throughout.
 """
@@ -27,6 +27,7 @@ from linkd.validator import validate
 
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
+from .budget import BUDGET_STEP, STROKE_FIRST, around_width, budget_steps, search_width
 from .constrained import pin, pin_stroke, pinned, rank, tightened
 from .parallel import PARTS, run_parts, split
 from .polish import polish
@@ -53,16 +54,11 @@ from .stroke_refine import refine_stroke
 if TYPE_CHECKING:
     from .pipeline import DesignOptions
 
-BUDGET_STEP = 30.0  # seconds: the default budget, the unit a longer one widens the search by
 N_POINTS = 200  # points of the normalised target the model and the refinement see
 FINE_POINTS = 1000  # of a drawn loop's target in the polish: a 200-point one, filtered at half
 # its spacing, rounds corners the user's own points keep
-DEFAULT_ROUNDS = 6  # refinement rounds in the default budget: the first and five that grow the
-# best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s; six,
-# once the dyads' backward was written out, 0.0244 in 17.5 s)
 ROUND_ITERATIONS = 130  # L-BFGS iterations of a later round's copies in the default budget
 ROUND_ORDERED_ITERATIONS = 50  # of which the first, every copy, at the coarse angles
-AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 POLISH = 8  # best designs refined again at the end at finer angles, for each 30 s of the budget
 POLISH_ANGLES = 1024
 POLISH_ITERATIONS = 200
@@ -74,40 +70,6 @@ POLISH_SHARE = 0.1  # of the budget kept from the rounds for the polish (a long 
 
 class NoDesign(Exception):
     """No candidate became a valid, verified design."""
-
-
-def search_width(
-    time_budget: float,
-    rounds: int | None,
-    atlas_paths: int | None,
-    refine_count: int | None = None,
-    stroke: bool = False,
-) -> tuple[int, int, int]:
-    """Refinement rounds, atlas paths and designs refined per round for the time budget, where
-    not given: DEFAULT_ROUNDS rounds, 1024 paths and 48 designs for the default 30 s; for every
-    further 30 s, 1024 paths and 16 designs more (wider rounds reach basins that longer ones
-    around the same few designs do not; each round also searches around more designs,
-    `around_width`)
-    and up to eight rounds more, as many as the budget's deadline leaves time for. The deadline
-    also stops refinement early on a slow or busy machine. An open or timed `stroke` has one
-    round (searching around the best works on closed loops) and spends the later rounds' time
-    on refining three times as many designs in it."""
-    steps = budget_steps(time_budget)
-    more = 8 * (steps - 1)
-    count = refine_count or 16 * (2 + steps) * (3 if stroke else 1)
-    rounds = 1 if stroke else (rounds or DEFAULT_ROUNDS + more)
-    return rounds, atlas_paths or 1024 * steps, count
-
-
-def around_width(time_budget: float, around: int | None) -> int:
-    """Designs each later round searches around, where not given: AROUND for each 30 s of the
-    budget (a longer budget's many rounds reach more basins from more starts: 120 s, 16)."""
-    return around or AROUND * budget_steps(time_budget)
-
-
-def budget_steps(time_budget: float) -> int:
-    """The budget in units of the default 30 s (at least one): what the search widens by."""
-    return max(1, round(time_budget / BUDGET_STEP))
 
 
 def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer | None,
@@ -227,14 +189,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
             batch, source = batch.subset(keep), source[keep]
         if len(batch) == 0:
             candidates = Candidates(batch, np.zeros(0))
-        elif stroke:
-            candidates = place_stroke(batch, goal)
         else:
-            candidates = place(batch, target, source)
-        candidates = pinned(candidates, inner, (partial(pin_stroke, goal=goal) if stroke
-                                                else partial(pin, target=target)))  # fmt: skip
-        if inner:
-            candidates = rank(candidates, inner)
+            candidates = _placed(batch, source, goal, target, inner)
         report["placed"] = len(candidates)  # valid designs and sub-mechanisms, on the curve
         best = f", best Chamfer {candidates.chamfer[0]:.4f}" if len(candidates) else ""
         note(f"{report['valid']} valid, {len(candidates)} placed{best}")
@@ -282,17 +238,14 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 if len(nearby) == 0:
                     note("no design that can be built to search around")
                     break
-                found = place(nearby, target, np.full(len(nearby), SOURCES.index("round 2")))
-                found = pinned(found, inner, partial(pin, target=target))  # placed anew
-                if inner:
-                    found = rank(found, inner)
+                found = _placed(nearby, np.full(len(nearby), SOURCES.index("round 2")), goal,
+                                target, inner)  # fmt: skip
                 first = len(candidates)
                 candidates = merged(candidates, found)
                 placed = np.concatenate([placed, found.chamfer])
-                rows = first + np.array(
-                    diverse_best(found.batch, np.arange(len(found)), refine_count, refine_count),
-                    int,
-                )
+                width = refine_count // STROKE_FIRST if stroke else refine_count
+                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)), width,
+                                                     width), int)  # fmt: skip
                 progress = _progress(stages, len(rows), nearby_settings)
                 done = refine_nearby(candidates, rows, progress)
                 if done < nearby_settings.iterations:
@@ -303,6 +256,17 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 gained = np.min(candidates.chamfer) < (1 - STALL_GAIN) * best
                 best, stalled = min(best, np.min(candidates.chamfer)), 0 if gained else stalled + 1
     return candidates, placed
+
+
+def _placed(batch: LinkageBatch, source: np.ndarray, goal: Goal, target: np.ndarray,
+            inner: Constraints) -> Candidates:  # fmt: skip
+    """The valid linkages of `batch` placed on the target (a stroke's by its best sub-arc too),
+    pinned where the constraints fix the crank's pivot, and ranked by them."""
+    if not goal.closed or goal.timed:
+        found = pinned(place_stroke(batch, goal, source), inner, partial(pin_stroke, goal=goal))
+    else:
+        found = pinned(place(batch, target, source), inner, partial(pin, target=target))
+    return rank(found, inner) if inner else found
 
 
 def _refiner(

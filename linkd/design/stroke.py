@@ -81,16 +81,18 @@ def make_goal(points: np.ndarray, closed: bool, timed: bool, count: int):
     return Goal(inverse.apply(timed_samples(points, closed, count)), closed, True), frame
 
 
-def place_stroke(batch: LinkageBatch, goal: Goal) -> Candidates:
+def place_stroke(batch: LinkageBatch, goal: Goal, source: np.ndarray | None = None) -> Candidates:
     """Keep the valid linkages of `batch`, place each on the goal by its best sub-arc and
-    similarity; returns the candidates, best first, with their crank ranges [a, b] (radians)
-    and, as `chamfer`, their score (`stroke_scores`)."""
+    similarity; returns the candidates, best first, with their crank ranges [a, b] (radians),
+    `source` (B,) (default: the proposer's) and, as `chamfer`, their score
+    (`stroke_scores`)."""
     result = validate(batch, PATH_ANGLES, keep_motion=True)
     paths = result.end_effector_paths(batch).astype(np.float64)
     keep = np.flatnonzero(result.valid & (spread(paths) > MOVES))
     batch, paths = batch.subset(keep), torch.as_tensor(paths[keep], dtype=torch.float32)
+    source = np.zeros(len(keep), int) if source is None else source[keep]
     if len(keep) == 0:
-        return Candidates(batch, np.zeros(0), ranges=np.zeros((0, 2)))
+        return Candidates(batch, np.zeros(0), source, ranges=np.zeros((0, 2)))
     target = torch.as_tensor(goal.samples(MATCH_POINTS), dtype=torch.float32)
     joints = torch.as_tensor(batch.positions, dtype=torch.float32)
     found = [_search(paths[c], joints[c], target, goal) for c in _chunks(len(keep))]
@@ -105,7 +107,7 @@ def place_stroke(batch: LinkageBatch, goal: Goal) -> Candidates:
     crank = crank_ranges(ranges[:, 0].numpy(), ranges[:, 1].numpy())
     score = stroke_scores(batch, crank, goal)
     order = np.argsort(score, kind="stable")
-    return Candidates(batch.subset(order), score[order], ranges=crank[order])
+    return Candidates(batch.subset(order), score[order], source[order], ranges=crank[order])
 
 
 def crank_ranges(start: np.ndarray, span: np.ndarray) -> np.ndarray:
