@@ -10,7 +10,7 @@ DEFAULT_ROUNDS = 6  # refinement rounds in the default budget: the first and fiv
 # best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s; six,
 # once the dyads' backward was written out, 0.0244 in 17.5 s)
 STROKE_ROUNDS = 3  # on an open or timed stroke, whose copies are placed more slowly (open
-# letters, two seeds: one round 0.1019 in 15 s, three 0.06 in 17 to 20 s, four 0.0629 in 24 s)
+# letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s, four 0.0629 in 24 s)
 STROKE_FIRST = 3  # times as many designs refined in a stroke's first round as in a later one
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 
