@@ -82,7 +82,7 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     default run with the same seed finds) and then its own wider one, and polishes the best of
     both: a wide search settles in different basins, and now and then in worse ones, so a
     longer budget could otherwise deliver a worse design than the default."""
-    stroke = not goal.closed or goal.timed
+    stroke = goal.stroke
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
@@ -164,7 +164,7 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
     """The proposed `graphs` and the atlas's paths placed on the target, the best refined, and
     the rounds that grow them, as wide as `o`'s budget asks and until `rounds_end`: the
     candidates and their errors as placed, before refinement."""
-    stroke = not goal.closed or goal.timed
+    stroke = goal.stroke
     rounds, atlas_paths, refine_count = search_width(o.time_budget, o.rounds, o.atlas_paths,
                                                      o.refine_count, stroke)  # fmt: skip
     report["rounds"], report["refine_count"] = rounds, refine_count
@@ -262,7 +262,7 @@ def _placed(batch: LinkageBatch, source: np.ndarray, goal: Goal, target: np.ndar
             inner: Constraints) -> Candidates:  # fmt: skip
     """The valid linkages of `batch` placed on the target (a stroke's by its best sub-arc too),
     pinned where the constraints fix the crank's pivot, and ranked by them."""
-    if not goal.closed or goal.timed:
+    if goal.stroke:
         found = pinned(place_stroke(batch, goal, source), inner, partial(pin_stroke, goal=goal))
     else:
         found = pinned(place(batch, target, source), inner, partial(pin, target=target))

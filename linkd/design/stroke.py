@@ -61,6 +61,12 @@ class Goal:
         return resample(self.points, count, closed=True)
 
     @property
+    def stroke(self) -> bool:
+        """An open or timed target: designs are placed on it by a crank range too, and scored
+        by their stroke's Chamfer distance or their timing error."""
+        return not self.closed or self.timed
+
+    @property
     def periodic(self) -> bool:
         """A closed timed target: its samples are reached at phase + 2 pi k / M, k < M."""
         return self.closed and self.timed
