@@ -155,12 +155,13 @@ def test_design_is_deterministic_for_a_seed(pool, curve_file, tmp_path):
 def test_rounds_and_polish_the_deadline_cuts_are_reported(pool, curve_file, tmp_path, monkeypatch):
     """Every refinement runs in full here, but the clock says the deadline has passed before
     the later rounds and the polish: the run then depends on the machine's speed, and says so."""
+    import time
     import types
 
     from linkd.design import search
 
     out = []
-    for name, clock in (("on time", lambda: 0.0), ("late", lambda: float("inf"))):
+    for name, clock in (("on time", time.monotonic), ("late", lambda: float("inf"))):
         monkeypatch.setattr(search, "time", types.SimpleNamespace(monotonic=clock))
         outcome = design(curve_file, tmp_path / name, options(rounds=3, atlas=False),
                          proposer=pool_proposer(pool), show=False)  # fmt: skip
@@ -169,6 +170,33 @@ def test_rounds_and_polish_the_deadline_cuts_are_reported(pool, curve_file, tmp_
     assert sum(source["refined"] for source in out[0]["sources"].values()) == out[0]["refined"]
     assert out[1]["rounds_run"] == 1 and out[1]["budget_cut_refinement"]
     assert out[1]["refine_iterations"] == QUICK.iterations  # the first refinement was whole
+
+
+def test_a_slow_first_refinement_leaves_the_later_rounds_their_share(pool, curve_file, tmp_path,
+                                                                    monkeypatch):  # fmt: skip
+    """On a machine so slow that one refinement step takes a second of a 26 s search, the
+    first refinement alone would fill the search (and leave no later round): it stops at its
+    share of the time, and a later round runs."""
+    import time
+    import types
+
+    from linkd.design import lbfgs, parallel
+
+    clock = [0.0]
+
+    def step_taken() -> float:
+        clock[0] += 1.0
+        return clock[0]
+
+    monkeypatch.setattr(time, "monotonic", lambda: clock[0])  # time passes only in L-BFGS steps
+    monkeypatch.setattr(lbfgs, "time", types.SimpleNamespace(monotonic=step_taken))
+    monkeypatch.setattr(parallel, "can_fork", lambda: False)  # one process, one clock
+    slow = RefineSettings(iterations=40, ordered_iterations=5)
+    outcome = design(curve_file, tmp_path / "slow", options(rounds=3, time_budget=38.0,
+                     refine_settings=slow), proposer=pool_proposer(pool), show=False)  # fmt: skip
+    report = outcome.report["search"]
+    assert report["refine_iterations"] < slow.iterations and report["budget_cut_refinement"]
+    assert report["rounds_run"] >= 2 and outcome.design is not None
 
 
 def test_design_does_not_depend_on_a_second_process(pool, curve_file, tmp_path, monkeypatch):

@@ -13,6 +13,10 @@ STROKE_ROUNDS = 3  # on an open or timed stroke, whose copies are placed more sl
 # letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s, four 0.0629 in 24 s)
 STROKE_FIRST = 3  # times as many designs refined in a stroke's first round as in a later one
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
+FIRST_SHARE = 0.5  # of the time left for refinement, the most the first round may take where
+# later rounds follow: on a slow or busy machine it would otherwise take all of it (on one 2.4
+# times slower than the one these widths were set on, open letters 0.1078 to 0.0910, closed
+# shapes 0.0336 to 0.0319; on that one it took at most 42 %)
 
 
 def search_width(

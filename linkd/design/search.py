@@ -27,7 +27,14 @@ from linkd.validator import validate
 
 from .atlas import DEFAULT_PATH, Atlas
 from .atlas import load as load_atlas
-from .budget import BUDGET_STEP, STROKE_FIRST, around_width, budget_steps, search_width
+from .budget import (
+    BUDGET_STEP,
+    FIRST_SHARE,
+    STROKE_FIRST,
+    around_width,
+    budget_steps,
+    search_width,
+)
 from .constrained import pin, pin_stroke, pinned, rank, tightened
 from .parallel import PARTS, run_parts, split
 from .polish import polish
@@ -203,7 +210,10 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
     candidates.chamfer = candidates.chamfer.copy()
     settings = tightened(o.refine_settings, inner) if inner else o.refine_settings
     if o.refine:
-        refine_rows = _refiner(goal, target, stroke, settings, inner, rounds_end)
+        first_end = rounds_end  # where later rounds follow, they keep a share of the time
+        if rounds > 1:
+            first_end = time.monotonic() + FIRST_SHARE * (rounds_end - time.monotonic())
+        refine_rows = _refiner(goal, target, stroke, settings, inner, first_end)
         with stages.stage("refine", "refining the best designs") as note:
             rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
                                          refine_count, o.per_topology), int)  # fmt: skip
