@@ -96,3 +96,35 @@ def test_search_combines_the_atlas_with_the_proposer_and_says_what_each_gave(atl
     refined = min(f["best_refined"] for f in search["sources"].values() if f["best_refined"])
     assert refined <= min(f["best_placed"] for f in search["sources"].values()) + 1e-9
     assert np.min(found.chamfer) < 0.02  # the curve is one of the pool's paths
+
+
+def test_a_stroke_is_looked_up_by_its_loop_and_placed_by_its_arc(atlas, tmp_path):
+    """An open stroke, most of the revolution of one of the atlas's paths, turned and scaled:
+    looked up by the stroke closed by a straight line, that path's mechanism is among those
+    found, and placed on the stroke by its sub-arc as well as it can be."""
+    from test_design import options, pool_proposer
+
+    from linkd.constraints import Constraints
+    from linkd.design.search import search as run_search
+    from linkd.design.stages import Stages
+    from linkd.design.stroke import make_goal, place_stroke
+    from linkd.generator import GeneratorSettings, generate
+
+    entry = 122
+    mechanism = atlas.batch(atlas.mechanism[[entry]])
+    motion = validate(mechanism, n_angles=400, keep_motion=True).motion
+    joint = atlas.joint[entry]
+    path = np.stack([motion.x[0, joint], motion.y[0, joint]], -1)
+    stroke = path[:340] @ np.array([[0.6, -0.8], [0.8, 0.6]]) * 3.0 + 5.0
+    goal = make_goal(stroke, closed=False, timed=False, count=200)[0]
+    pool = generate(8, seed=3, settings=GeneratorSettings(min_nodes=5, max_nodes=7)).graphs
+    atlas.save(tmp_path / "atlas.npz")
+    opts = options(atlas=True, atlas_path=str(tmp_path / "atlas.npz"), atlas_paths=32,
+                   candidates=4, rotations=1, refine=False)  # fmt: skip
+    search: dict = {}
+    run_search(goal, Constraints(), opts, pool_proposer(pool), Stages(False),
+               time.monotonic() + 600, search)  # fmt: skip
+    # As well placed as the path's own mechanism (the score's floor: 64 points a curve).
+    own = place_stroke(mechanism.sub_mechanisms(np.arange(1), np.array([joint])), goal).chamfer
+    assert search["sources"]["atlas"]["best_placed"] <= own[0] + 1e-6
+    assert search["sources"]["model"]["best_placed"] > 2 * own[0]  # the pool holds no such path

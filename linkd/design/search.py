@@ -177,7 +177,7 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
     report["rounds"], report["refine_count"] = rounds, refine_count
     around_count = around_width(o.time_budget, o.around)
     batches = [LinkageBatch.from_graphs(graphs)]
-    if o.atlas and not stroke:
+    if o.atlas:  # a stroke by its loop: one arc of the paths found may trace it
         with stages.stage("atlas", "looking the shape up in the atlas") as note:
             atlas = _atlas(o.atlas_path)
             if atlas is None:
