@@ -212,7 +212,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
     if o.refine:
         first_end = rounds_end  # where later rounds follow, they keep a share of the time
         if rounds > 1:
-            first_end = time.monotonic() + FIRST_SHARE * (rounds_end - time.monotonic())
+            now = time.monotonic()
+            first_end = now + FIRST_SHARE * (rounds_end - now)
         refine_rows = _refiner(goal, target, stroke, settings, inner, first_end)
         with stages.stage("refine", "refining the best designs") as note:
             rows = np.array(diverse_best(candidates.batch, np.arange(len(candidates)),
