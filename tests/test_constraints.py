@@ -187,6 +187,8 @@ def small(tmp_path_factory):
 
 
 def run(pool, curve, out, limits: Constraints, refine: bool = True, atlas: bool = True):
+    """A constrained design run; with the atlas, its 128 paths nearest the curve."""
+
     def propose(curves, per_curve, seed):
         order = np.random.default_rng(seed).permutation(len(pool))
         return pool[np.resize(order, len(curves) * per_curve)]
@@ -194,7 +196,7 @@ def run(pool, curve, out, limits: Constraints, refine: bool = True, atlas: bool 
     quick = RefineSettings(iterations=20, ordered_iterations=5)
     opts = DesignOptions(candidates=12, time_budget=600, refine_settings=quick, refine=refine,
                          formats=frozenset({"mjcf"}), constraints=limits, rounds=2,
-                         atlas=atlas)  # fmt: skip
+                         atlas=atlas, atlas_paths=128)  # fmt: skip
     return design(curve, out, opts, proposer=propose, show=False)
 
 
