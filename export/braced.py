@@ -79,7 +79,8 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         chosen, share = _subset(union, conflicts, keep, held, ground if relaxed else ())
         arms = [sum(roles[keep[m]][0] == "arm" for m in pin.members) for pin in chosen.pins]
         shafts = [k for k, count in enumerate(arms) if count >= 2]  # stay whole at the ground
-        return stack_layers(chosen, share, sizes, stubs=True, whole=shafts), keep, chosen
+        layout = stack_layers(chosen, share, sizes, stubs=True, whole=shafts, fewest=not relaxed)
+        return layout, keep, chosen
 
     try:  # every plate left out, no ground pin at all: looser than any choice
         layered({q: () for q in plates}, (), relaxed=True)

@@ -82,7 +82,7 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         searches += 1
         problem = _problem(assembly, union, conflicts, roles, fork, held, bracket, relaxed)
         try:
-            return problem, _layered(problem, union, conflicts, sizes)
+            return problem, _layered(problem, union, conflicts, sizes, fewest=not relaxed)
         except NoFlatLayers as exc:
             refusal = refusal or exc
             if relaxed and exc.proved:
@@ -179,9 +179,11 @@ def _add(problem: _Problem, pin: Pin, members: list[int], near: list[int]) -> in
     return len(problem.pins) - 1
 
 
-def _layered(problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout:
+def _layered(
+    problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Sizes, fewest: bool = True
+) -> Layout:
     """stack_layers on the fork's candidates: a part's copies share its clearances and may
-    not share a layer with each other."""
+    not share a layer with each other (fewest: as there)."""
     sub = np.ix_(problem.keep, problem.keep)
     near, distance = conflicts.parts[sub].copy(), conflicts.distance[sub].copy()
     copies = problem.arms
@@ -190,7 +192,7 @@ def _layered(problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Si
     near[copies, copies] = False
     chosen = Assembly([union.parts[u] for u in problem.keep], [], problem.pins, [])
     return stack_layers(chosen, Conflicts(near, problem.blocked, distance), sizes, stubs=True,
-                        whole=problem.whole)  # fmt: skip
+                        whole=problem.whole, fewest=fewest)  # fmt: skip
 
 
 def _real(

@@ -232,12 +232,15 @@ def stack_layers(
     sizes: Sizes,
     stubs: bool = False,
     whole: Collection[int] = (),
+    fewest: bool = True,
 ) -> Layout:
     """The layers of `assign_layers` for given conflicts (ValueError as there). stubs: the
     parts of each ground pin but those `whole` (a split part's shaft) may be held from either
     plate (`braced`), which is looser than any cover choice. It is searched first (proved
     impossible, nothing else need be); then every pin in the base, and failing that the
-    stubs' order is taken."""
+    stubs' order is taken. fewest: search for the fewest layers; without it, the first order's
+    layers (a check whether any layering exists, as the bounds of the costlier constructions
+    ask, skips that search)."""
     moving = conflicts.parts[1:, 1:]
     pins = [
         ([m - 1 for m in pin.members if m], [b - 1 for b in blocked])
@@ -262,8 +265,8 @@ def stack_layers(
             _refuse(proved)
         order, cover = loose, None
     layers = stack_in_order(moving, order)
-    fewest, minimal = chromatic_number(moving)
-    for stack in range(fewest, max(layers)):
+    least, minimal = chromatic_number(moving) if fewest else (max(layers), False)
+    for stack in range(least, max(layers)):
         search = StackSearch(moving, _pin_state(len(moving), pins, grounded, cover, whole))
         found = search.run(stack)
         if found is not None:

@@ -48,7 +48,8 @@ def _impossible(
     """Is no stack proved to keep the pins `blocked` (index -> the parts kept off it) clear?"""
     chosen = replace(assembly, pins=[assembly.pins[k] for k in blocked])
     try:
-        stack_layers(chosen, replace(conflicts, blocked=list(blocked.values())), sizes)
+        stack_layers(chosen, replace(conflicts, blocked=list(blocked.values())), sizes,
+                     fewest=False)  # fmt: skip
     except NoFlatLayers as exc:
         return exc.proved
     return False

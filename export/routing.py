@@ -176,7 +176,7 @@ def bent_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
         for q in range(len(assembly.parts)):
             passable[k, q] = not _cannot_pass(assembly, paths, turns, q, pin.joint, reach)
     hopeless = [[q for q in b if not passable[k, q]] for k, b in enumerate(conflicts.blocked)]
-    stack_layers(assembly, replace(conflicts, blocked=hopeless), sizes)  # or ValueError
+    stack_layers(assembly, replace(conflicts, blocked=hopeless), sizes, fewest=False)  # or refused
     pins: dict[int, set[int]] = {}
     for _ in range(ROUNDS):
         before = sum(map(len, pins.values()))

@@ -40,24 +40,34 @@ class PinState:
     def free(self, p: int) -> bool:
         return not self.layer[p] and not self.blocking[p]
 
+    def ready(self) -> list[int]:
+        """The parts that can be placed next."""
+        layer, blocking = self.layer, self.blocking
+        return [p for p in range(len(layer)) if not layer[p] and not blocking[p]]
+
     def place(self, p: int, level: int, step: int = 1) -> None:
-        """Place part p on `level` (step 1) or take it back (step -1)."""
+        """Place part p on `level` (step 1) or take it back (step -1). The hottest loop of the
+        layer searches: the pins' counts are read once each."""
         self.layer[p] = level if step > 0 else 0
         self.left -= step
+        placed, total, blocking = self.placed, self.total, self.blocking
         for k in self.member_of[p]:
-            was = self.is_open(k)
-            self.placed[k] += step
-            if was != self.is_open(k):
+            before = placed[k]
+            placed[k] = after = before + step
+            was, now = 0 < before < total[k], 0 < after < total[k]
+            if was != now:
                 for b in self.blocked[k]:
-                    self.blocking[b] += -1 if was else 1
+                    blocking[b] += 1 if now else -1
 
     def closes(self, p: int) -> int:
         """How many open pins placing p would close, less how many it would open."""
         score = 0
+        placed, total = self.placed, self.total
         for k in self.member_of[p]:
-            if self.is_open(k) and self.placed[k] == self.total[k] - 1:
+            done, needed = placed[k], total[k]
+            if 0 < done == needed - 1:
                 score += 1
-            elif self.placed[k] == 0 and self.total[k] > 1 and self.blocked[k]:
+            elif done == 0 and needed > 1 and self.blocked[k]:
                 score -= 1
         return score
 
@@ -70,7 +80,6 @@ def find_order(state: PinState, conflict: np.ndarray) -> tuple[list[int] | None,
     then parts that close pins rather than open them. Which pins are open depends only on the
     set of parts placed, so a set that led nowhere is never expanded again.
     """
-    n = len(state.layer)
     clashes = [sum(1 << q for q in np.flatnonzero(row)) for row in conflict]  # as bit sets
     dead: set[int] = set()
     order: list[int] = []
@@ -80,12 +89,12 @@ def find_order(state: PinState, conflict: np.ndarray) -> tuple[list[int] | None,
             return True
         if placed in dead or len(dead) > SEARCH_BUDGET:
             return False
-        ready = [p for p in range(n) if state.free(p)]
-        fits = {p: not clashes[p] & here for p in ready}
-        for p in sorted(ready, key=lambda p: (not fits[p], -state.closes(p))):
+        ready = [p for p in state.ready() if placed | 1 << p not in dead]  # dead: not entered
+        for p in sorted(ready, key=lambda p: (bool(clashes[p] & here), -state.closes(p))):
+            fits = not clashes[p] & here
             state.place(p, len(order) + 1)
             order.append(p)
-            if extend(placed | 1 << p, here | 1 << p if fits[p] else 1 << p):
+            if extend(placed | 1 << p, here | 1 << p if fits else 1 << p):
                 return True
             order.pop()
             state.place(p, 0, -1)

@@ -151,13 +151,19 @@ def _with_straps(
 
 
 def _layered(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout | None:
-    """Layers with every ground pin whole, else held from both plates; None if neither."""
-    for stubs in (False, True):
-        try:
-            return stack_layers(assembly, conflicts, sizes, stubs=stubs)
-        except NoFlatLayers:
-            continue
-    return None
+    """Layers with every ground pin whole, else held from both plates; None if neither. The
+    stubs' search goes first: it is looser than any whole layering, so where it is proved
+    impossible (as for most strap choices) the whole pins' costlier search is spared."""
+    try:
+        held = stack_layers(assembly, conflicts, sizes, stubs=True)
+    except NoFlatLayers as refused:
+        if refused.proved:
+            return None
+        held = None
+    try:
+        return stack_layers(assembly, conflicts, sizes)
+    except NoFlatLayers:
+        return held
 
 
 def _passing(
