@@ -60,8 +60,9 @@ def test_design_example_curve_with_the_shipped_model(tmp_path, monkeypatch, caps
     assert (out / "mechanism.xml").is_file() and list((out / "meshes").glob("*.stl"))
     assert "verified" in capsys.readouterr().out
     # A second run does not overwrite the first: it takes a fresh name, the one the summary
-    # names the folder by in every line (relative, as the first run's name is).
-    assert main([*args, "--export", "stl", "--top", "1"]) == 0
+    # names the folder by in every line (relative, as the first run's name is). A shorter budget
+    # serves: this run is about the name and the summary.
+    assert main([*args, "--export", "stl", "--top", "1", "--time-budget", "10"]) == 0
     assert (tmp_path / "ellipse-design-2" / "mechanism.json").is_file()
     printed = capsys.readouterr().out
     assert printed.startswith("ellipse-design-2: ") and str(tmp_path) not in printed
@@ -77,7 +78,8 @@ def test_random_proposer_designs_blind_to_the_curve(tmp_path, monkeypatch):
 
     monkeypatch.chdir(tmp_path)
     curve = str(EXAMPLES / "ellipse.csv")
-    args = ["design", curve, "--export", "mjcf", "--candidates", "32", "--proposer", "random"]
+    args = ["design", curve, "--export", "mjcf", "--candidates", "32", "--proposer", "random",
+            "--time-budget", "10"]  # fmt: skip
     assert main([*args, "--out", "a"]) == 0
     report = json.loads((tmp_path / "a" / "report.json").read_text())
     assert report["search"]["proposer"] == "random" and "model" not in report["search"]

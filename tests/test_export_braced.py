@@ -4,6 +4,7 @@ posts caught."""
 
 import xml.etree.ElementTree as ET
 
+import mujoco
 import pytest
 import trimesh
 from planted import collision_detail, editable_copy
@@ -43,8 +44,22 @@ def knotted(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def stacked(tmp_path_factory):
-    out = tmp_path_factory.mktemp("stacked")
-    return out, export_mechanism(STACKED, out, {"mjcf", "stl"})
+    """STACKED exported with meshes, and (its layers searched once) as MJCF alone."""
+    import linkd.export
+
+    layered, found = linkd.export._layered, []
+
+    def once(*args, **kwargs):
+        if not found:
+            found.append(layered(*args, **kwargs))
+        return found[0]
+
+    out, bare = tmp_path_factory.mktemp("stacked"), tmp_path_factory.mktemp("bare")
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(linkd.export, "_layered", once)
+        result = export_mechanism(STACKED, out, {"mjcf", "stl"})
+        export_mechanism(STACKED, bare, {"mjcf"})
+    return out, result, bare
 
 
 def _refused_flat_and_bent(mech: Mechanism) -> None:
@@ -92,7 +107,7 @@ def test_a_crank_refused_flat_and_bent_is_built_split_and_verified(knotted):
 
 
 def test_a_plate_split_on_its_own_shaft_and_a_bracketed_pin_are_built_and_verified(stacked):
-    out, result = stacked
+    out, result, _ = stacked
     _refused_flat_and_bent(STACKED)
     _check_parts(out, result.parts)
     parts = {p["name"]: p for p in result.parts}
@@ -147,10 +162,12 @@ def test_without_brackets_the_same_mechanism_is_refused(tmp_path):
         export_mechanism(KNOTTED, tmp_path, {"mjcf"}, ExportOptions(brackets=False))
 
 
-def test_a_bracketed_model_without_meshes_compiles(tmp_path):
+def test_a_bracketed_model_without_meshes_compiles(stacked):
     """Without STL the plates are boxes and discs: the disc round a post in the base plate is
     named apart from the post itself (MuJoCo refuses a repeated geom name)."""
-    result = export_mechanism(STACKED, tmp_path, {"mjcf"})
-    assert any(p["kind"] == "post" for p in result.parts)
-    names = [g.get("name") for g in ET.parse(tmp_path / "mechanism.xml").iter("geom")]
+    bare = stacked[2]
+    assert not (bare / "meshes").exists()
+    assert any(p["kind"] == "post" for p in Mechanism.load(bare / "mechanism.json").extra["parts"])
+    names = [g.get("name") for g in ET.parse(bare / "mechanism.xml").iter("geom")]
+    assert mujoco.MjModel.from_xml_path(str(bare / "mechanism.xml")).ngeom > 0
     assert "ground_post0" in names and len(names) == len(set(names))
