@@ -27,7 +27,7 @@ from linkd.mechanism import Mechanism
 
 from .options import Sizes
 from .parts import Assembly, joint_paths
-from .planar import convex_hull, cross, point_segment, segment_distance
+from .planar import convex_hull, cross, least_distances, point_segment
 from .stacking import (
     SEARCH_BUDGET,
     PinState,
@@ -167,6 +167,29 @@ def sweep(mech: Mechanism, width: float) -> np.ndarray:
     return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
 
 
+def _to_segment(p: np.ndarray, _: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Point p's distance to segment a-b (`least_distances`'s form: p is a segment of length 0)."""
+    return point_segment(p, a, b)
+
+
+def _fixed_apart(points: np.ndarray) -> np.ndarray:
+    """(N, N) bool: the pairs of the (N, T) points that keep their distance over the sweep (on
+    one part or both on the ground): four points that keep all theirs move as one body."""
+    tolerance = 1e-9 * np.abs(points).max() ** 2
+    x, y = points.real, points.imag
+
+    def spread(i: np.ndarray, j: np.ndarray, angles: slice) -> np.ndarray:
+        return np.ptp((x[i, angles] - x[j, angles]) ** 2 + (y[i, angles] - y[j, angles]) ** 2, -1)
+
+    i, j = np.triu_indices(len(points), 1)
+    for angles in (slice(None, None, 16), slice(None)):  # at every 16th angle first
+        kept = spread(i, j, angles) <= tolerance
+        i, j = i[kept], j[kept]
+    fixed = np.eye(len(points), dtype=bool)
+    fixed[i, j] = fixed[j, i] = True
+    return fixed
+
+
 def find_conflicts(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, chains: dict[int, list[int]] | None = None
 ) -> Conflicts:
@@ -183,11 +206,14 @@ def find_conflicts(
     owner = np.array([e[0] for e in edges])
     points = paths[..., 0] + 1j * paths[..., 1]  # (N, T)
     start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]  # (E, T)
-    edge_gap = np.zeros((len(edges), len(edges)))
-    for k in range(len(edges)):  # one row of the symmetric table at a time, over all angles
-        edge_gap[k, k:] = segment_distance(start[k], end[k], start[k:], end[k:]).min(-1)
-        edge_gap[k:, k] = edge_gap[k, k:]
-    joint_gap = np.stack([point_segment(points[n], start, end).min(-1) for n in range(n_joints)])
+    ends = np.array([e[1:] for e in edges])
+    fixed = _fixed_apart(points)
+    joined = fixed[ends[:, 0], ends[:, 1]]  # the edges that keep their length
+    both = fixed[ends[:, None, :, None], ends[None, :, None]].all((2, 3))  # (E, E): 4 ends
+    rigid = joined[:, None] & joined & both
+    edge_gap = least_distances(start, end, start, end, symmetric=True, rigid=rigid)
+    rigid = joined & fixed[:, ends[:, 0]] & fixed[:, ends[:, 1]]  # joints that ride with an edge
+    joint_gap = least_distances(points, points, start, end, _to_segment, rigid=rigid)
     distance = np.full((n_parts, n_parts), np.inf)
     np.minimum.at(distance, (owner[:, None], owner[None, :]), edge_gap)
     to_part = np.full((n_joints, n_parts), np.inf)

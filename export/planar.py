@@ -3,6 +3,8 @@ part's joints and the distances between the segments of its outline."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 
@@ -46,3 +48,59 @@ def segment_distance(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndar
         cross(b1, b2, a1) * cross(b1, b2, a2) < 0
     )
     return np.where(crossing, 0.0, d)
+
+
+BLOCK = 1 << 16  # segment pairs times coarse angles reckoned at once (memory)
+
+
+def least_distances(
+    a1: np.ndarray,
+    a2: np.ndarray,
+    b1: np.ndarray,
+    b2: np.ndarray,
+    distance: Callable = segment_distance,
+    symmetric: bool = False,
+    rigid: np.ndarray | None = None,
+    stride: int = 16,
+) -> np.ndarray:
+    """(P, M) least `distance` over the angles between each segment a1-a2 (P, T) and each
+    b1-b2 (M, T), cyclic in the angle: `distance(a1[:, None], a2[:, None], b1, b2).min(-1)`,
+    reckoned at every `stride`-th angle and then only at the angles between two where the
+    segments may come nearer. No point of a segment moves further than its farther-moving
+    end, so between two angles the distance falls no lower than the mean of the distances
+    there less half the way both segments' ends travel. (Parts pass near each other at a few
+    angles of a sweep of thousands.) symmetric: a and b are the same segments. rigid: (P, M)
+    pairs that move as one body, whose distance is the same at every angle (the coarse ones
+    serve)."""
+    count = a1.shape[-1]
+    coarse = np.arange(0, count, stride)
+    length = np.append(np.diff(coarse), count - coarse[-1])
+    travel_a, travel_b = _travel(a1, a2, coarse), _travel(b1, b2, coarse)
+    least = np.empty((len(a1), len(b1)))
+    rows = max(1, BLOCK // (len(b1) * len(coarse)))
+    for first in range(0, len(a1), rows):
+        p = slice(first, first + rows)
+        near = distance(a1[p, None, coarse], a2[p, None, coarse], b1[:, coarse], b2[:, coarse])
+        least[p] = near.min(-1)
+        travel = travel_a[p, None] + travel_b
+        lowest = (near + np.roll(near, -1, axis=-1) - travel) / 2  # within each stretch
+        spared = 1e-9 * (np.abs(near) + travel)  # rounding, which the exact values avoid
+        maybe = (lowest - spared < least[p, :, None]) & (least[p, :, None] > 0)
+        if rigid is not None:
+            maybe &= ~rigid[p, :, None]
+        if symmetric:  # the pairs below the diagonal are mirrored at the end
+            maybe &= (np.arange(first, first + len(near))[:, None] <= np.arange(len(b1)))[..., None]
+        k, m, c = np.nonzero(maybe)
+        k, m, t = (np.repeat(z, length[c]) for z in (k + first, m, coarse[c]))
+        t += np.arange(len(t)) - np.repeat(np.cumsum(length[c]) - length[c], length[c])
+        np.minimum.at(least, (k, m), distance(a1[k, t], a2[k, t], b1[m, t], b2[m, t]))
+    if symmetric:
+        least = np.triu(least) + np.triu(least, 1).T
+    return least
+
+
+def _travel(p: np.ndarray, q: np.ndarray, coarse: np.ndarray) -> np.ndarray:
+    """(..., C) the way the farther-travelling end of each segment p-q goes from each coarse
+    angle to the next (cyclic)."""
+    way = [np.add.reduceat(np.abs(np.roll(z, -1, axis=-1) - z), coarse, axis=-1) for z in (p, q)]
+    return np.maximum(*way)

@@ -18,7 +18,7 @@ from linkd.export.layers import (
 from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import CRANK, assemble, rigid_parts
-from linkd.export.planar import convex_hull, segment_distance
+from linkd.export.planar import convex_hull, least_distances, point_segment, segment_distance
 from linkd.export.plates import plates
 from linkd.export.rods import pin_rods
 from linkd.geometry import Similarity, rotation
@@ -112,6 +112,56 @@ def test_segment_distance_matches_dense_sampling():
     step = np.abs(np.concatenate([a2 - a1, b2 - b1])).max() / 120
     assert np.all(dense - exact <= step)
     assert np.all(segment_distance(a1, a2, a1, a2) == 0)
+
+
+def _closed_paths(rng, count: int, angles: int) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, angles, endpoint=False)
+    centre, cos, sin = rng.normal(size=(3, count, 1)) + 1j * rng.normal(size=(3, count, 1))
+    return centre + cos * np.cos(t) + sin * np.sin(t)
+
+
+@pytest.mark.parametrize("stride", [1, 7, 16, 33])
+def test_least_distances_are_the_least_over_every_angle(stride):
+    """Reckoned at a few angles and then only where segments may come nearer, the least
+    distances are those over every angle, to the last bit; pairs said to move as one body
+    (segments fixed in one turning frame) to rounding."""
+    rng = np.random.default_rng(stride)
+    t = np.linspace(0, 2 * np.pi, 1000, endpoint=False)
+    origin, turn = _closed_paths(rng, 1, 1000)[0], np.exp(1j * (t + 0.3 * np.sin(3 * t)))
+    a1, a2, r1, r2 = (origin + turn * (rng.normal(size=(3, 1)) + 1j * rng.normal(size=(3, 1)))
+                      for _ in range(4))  # fmt: skip
+    b1, b2 = (np.concatenate([_closed_paths(rng, 4, 1000), r]) for r in (r1, r2))
+    every = segment_distance(a1[:, None], a2[:, None], b1, b2).min(-1)
+    assert np.array_equal(least_distances(a1, a2, b1, b2, stride=stride), every)
+    rigid = np.zeros(every.shape, bool)
+    rigid[:, 4:] = True  # the riders in a's frame
+    assert np.allclose(least_distances(a1, a2, b1, b2, rigid=rigid, stride=stride), every,
+                       rtol=1e-12, atol=0)  # fmt: skip
+    both = segment_distance(b1[:, None], b2[:, None], b1, b2).min(-1)
+    assert np.array_equal(least_distances(b1, b2, b1, b2, symmetric=True, stride=stride), both)
+    to_point = least_distances(a1, a1, b1, b2, lambda p, _, s, e: point_segment(p, s, e))
+    assert np.array_equal(to_point, point_segment(a1[:, None], b1, b2).min(-1))
+
+
+def test_conflicts_are_those_reckoned_at_every_angle(monkeypatch):
+    """A Jansen leg's plates and ground keep their joints' distances: those pairs are reckoned
+    at a few angles, the rest where they may come near; the conflicts are the same as where
+    every pair is reckoned at every angle."""
+    from linkd.export import layers
+
+    mech = classic.jansen_leg()
+    assembly = assemble(mech)
+    sizes = resolve_sizes(mech, assembly.parts, None)
+    paths = sweep(mech, sizes.link_width)
+    fast = find_conflicts(assembly, paths, sizes)
+
+    def at_every_angle(a1, a2, b1, b2, distance=segment_distance, **_):
+        return distance(a1[:, None], a2[:, None], b1, b2).min(-1)
+
+    monkeypatch.setattr(layers, "least_distances", at_every_angle)
+    slow = find_conflicts(assembly, paths, sizes)
+    assert np.array_equal(fast.parts, slow.parts) and fast.blocked == slow.blocked
+    assert np.allclose(fast.distance, slow.distance, rtol=1e-12, atol=1e-9)
 
 
 def test_convex_hull_is_counter_clockwise_and_drops_interior_points():
