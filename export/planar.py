@@ -77,7 +77,7 @@ def least_distances(
     length = np.append(np.diff(coarse), count - coarse[-1])
     travel_a, travel_b = _travel(a1, a2, coarse), _travel(b1, b2, coarse)
     least = np.empty((len(a1), len(b1)))
-    rows = max(1, BLOCK // (len(b1) * len(coarse)))
+    rows = max(1, BLOCK // max(1, len(b1) * len(coarse)))
     for first in range(0, len(a1), rows):
         p = slice(first, first + rows)
         near = distance(a1[p, None, coarse], a2[p, None, coarse], b1[:, coarse], b2[:, coarse])
