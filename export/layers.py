@@ -27,7 +27,7 @@ from linkd.mechanism import Mechanism
 
 from .options import Sizes
 from .parts import Assembly, joint_paths
-from .planar import convex_hull, cross, least_distances, point_segment
+from .planar import convex_hull, cross, least_distances, to_segment
 from .stacking import (
     SEARCH_BUDGET,
     PinState,
@@ -167,11 +167,6 @@ def sweep(mech: Mechanism, width: float) -> np.ndarray:
     return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
 
 
-def _to_segment(p: np.ndarray, _: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Point p's distance to segment a-b (`least_distances`'s form: p is a segment of length 0)."""
-    return point_segment(p, a, b)
-
-
 def _fixed_apart(points: np.ndarray) -> np.ndarray:
     """(N, N) bool: the pairs of the (N, T) points that keep their distance over the sweep (on
     one part or both on the ground): four points that keep all theirs move as one body."""
@@ -213,7 +208,7 @@ def find_conflicts(
     rigid = joined[:, None] & joined & both
     edge_gap = least_distances(start, end, start, end, symmetric=True, rigid=rigid)
     rigid = joined & fixed[:, ends[:, 0]] & fixed[:, ends[:, 1]]  # joints that ride with an edge
-    joint_gap = least_distances(points, points, start, end, _to_segment, rigid=rigid)
+    joint_gap = least_distances(points, points, start, end, to_segment, rigid=rigid)
     distance = np.full((n_parts, n_parts), np.inf)
     np.minimum.at(distance, (owner[:, None], owner[None, :]), edge_gap)
     to_part = np.full((n_joints, n_parts), np.inf)

@@ -38,6 +38,11 @@ def point_segment(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.abs(ap - t * ab)
 
 
+def to_segment(p: np.ndarray, _: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Point p's distance to segment a-b in `least_distances`'s form (p: a segment of length 0)."""
+    return point_segment(p, a, b)
+
+
 def segment_distance(a1: np.ndarray, a2: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
     """Distance between segments a1-a2 and b1-b2 (complex points, broadcast; 0 if they cross)."""
     d = np.minimum(

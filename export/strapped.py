@@ -28,7 +28,7 @@ import numpy as np
 from .layers import Conflicts, Layout, NoFlatLayers, Strap, find_conflicts, hull_edges, stack_layers
 from .options import Sizes
 from .parts import Assembly
-from .planar import convex_hull, cross, point_segment
+from .planar import convex_hull, cross, least_distances, point_segment, to_segment
 
 MAX_STRAPS = 120  # layer searches per width before the construction gives up
 
@@ -47,10 +47,11 @@ def strapped_layers(
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering", False)
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
     choices = [(s,) for s in ranked] + list(combinations(ranked, 2))
+    swept = _Swept(assembly, paths, sorted({s.joint for s in options}))
     for chosen in islice(choices, min(MAX_STRAPS, searches or MAX_STRAPS)):
         if len({s.part for s in chosen}) < len(chosen):
             continue
-        layout = _layered(assembly, _with_straps(assembly, conflicts, paths, sizes, chosen), sizes)
+        layout = _layered(assembly, _with_straps(assembly, conflicts, swept, sizes, chosen), sizes)
         if layout is not None:
             straps = tuple(_passing(assembly, paths[:, 0], sizes, layout, s) for s in chosen)
             return replace(layout, straps=straps)
@@ -110,41 +111,56 @@ def _near(conflicts: Conflicts, strap: Strap) -> set[int]:
     return {k for k, near in enumerate(conflicts.blocked) if strap.part in near}
 
 
+class _Swept:
+    """What every strap choice reads from the sweep, reckoned once: from each sheave's centre
+    (`joints`) the least distance to each part's outline and to each joint, and the largest
+    step of a joint between two angles."""
+
+    def __init__(self, assembly: Assembly, paths: np.ndarray, joints: list[int]):
+        points = paths[..., 0] + 1j * paths[..., 1]
+        edges = hull_edges(assembly, paths[:, 0])
+        owner = np.array([e[0] for e in edges])
+        start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]
+        centres = points[joints]
+        to_edges = least_distances(centres, centres, start, end, to_segment)  # (S, E)
+        self.row = {j: k for k, j in enumerate(joints)}
+        self.to_part = np.full((len(joints), len(assembly.parts)), np.inf)
+        np.minimum.at(self.to_part, (np.arange(len(joints))[:, None], owner[None]), to_edges)
+        self.to_joint = np.abs(centres[:, None] - points[None]).min(-1)  # (S, N)
+        self.step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+        self.positions = paths[:, 0]
+
+
 def _with_straps(
-    assembly: Assembly, conflicts: Conflicts, paths: np.ndarray, sizes: Sizes, chosen: tuple
+    assembly: Assembly, conflicts: Conflicts, swept: _Swept, sizes: Sizes, chosen: tuple
 ) -> Conflicts:
     """The conflicts with each chosen part's outline grown by its sheave's disc: other parts
     and the sheaves of other straps keep a width and the clearance from it, other pins their
     reach; the pins it frees are no longer kept off its layer."""
-    points = paths[..., 0] + 1j * paths[..., 1]
-    edges = hull_edges(assembly, paths[:, 0])
-    owner = np.array([e[0] for e in edges])
-    start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]
-    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
-    reach = (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance + step
+    reach = (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance + swept.step
     distance, blocked = conflicts.distance.copy(), [list(b) for b in conflicts.blocked]
     for strap in chosen:
-        centre, a = points[strap.joint], strap.part
-        to_edges = point_segment(centre, start, end).min(-1) - strap.radius
-        for q in range(1, len(assembly.parts)):
-            if q != a:
-                distance[a, q] = distance[q, a] = min(distance[a, q], to_edges[owner == q].min())
+        row, a = swept.row[strap.joint], strap.part
+        grown = swept.to_part[row] - strap.radius
+        grown[[0, a]] = np.inf  # the ground's plates have layers of their own
+        distance[a] = np.minimum(distance[a], grown)
+        distance[:, a] = distance[a]
         for other in chosen:
             if other.part != a:
-                apart = np.abs(centre - points[other.joint]).min() - strap.radius - other.radius
+                apart = swept.to_joint[row, other.joint] - strap.radius - other.radius
                 distance[a, other.part] = min(distance[a, other.part], apart)
                 distance[other.part, a] = distance[a, other.part]
-        inside = _inside(assembly, paths[:, 0], sizes, strap)
+        inside = _inside(assembly, swept.positions, sizes, strap)
         for k, pin in enumerate(assembly.pins):
             if k in inside:
                 blocked[k] = [q for q in blocked[k] if q != a]
             elif (
                 a not in pin.members
                 and a not in blocked[k]
-                and (np.abs(points[pin.joint] - centre).min() - strap.radius < reach)
+                and swept.to_joint[row, pin.joint] - strap.radius < reach
             ):
                 blocked[k].append(a)
-    near = distance < sizes.link_width + sizes.clearance + step
+    near = distance < sizes.link_width + sizes.clearance + swept.step
     np.fill_diagonal(near, False)
     near[0], near[:, 0] = False, False
     return replace(conflicts, parts=near, blocked=blocked, distance=distance)
