@@ -8,7 +8,7 @@ from test_design import QUICK, pool_proposer
 from test_polish import FINE, _coarsely_refined, _unit_crank_rocker
 
 from linkd.constraints import Constraints
-from linkd.design import budget
+from linkd.design import budget as budget_module
 from linkd.design import search as search_module
 from linkd.design.pipeline import DesignOptions
 from linkd.design.polish import POLISH_RANGE, polish
@@ -33,7 +33,7 @@ def test_a_longer_budget_holds_the_default_search(pool, monkeypatch):
     same best design before the polish) and then searches wider; it delivers no worse. The
     default budget is taken as 10 s (the search's widths count it, its deadlines scale with
     it): the same searches as for 30 s and 60 s, with less time waiting on the deadline."""
-    for module in (budget, search_module):
+    for module in (budget_module, search_module):
         monkeypatch.setattr(module, "BUDGET_STEP", 10.0)
     short, short_report = _search(pool, 10, 600)
     # The default search inside ends where a default run's would: 11 s before this deadline,
