@@ -18,7 +18,13 @@ from linkd.export.layers import (
 from linkd.export.meshes import SEGMENTS
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import CRANK, assemble, rigid_parts
-from linkd.export.planar import convex_hull, least_distances, point_segment, segment_distance
+from linkd.export.planar import (
+    convex_hull,
+    least_distances,
+    point_segment,
+    segment_distance,
+    to_segment,
+)
 from linkd.export.plates import plates
 from linkd.export.rods import pin_rods
 from linkd.geometry import Similarity, rotation
@@ -139,7 +145,7 @@ def test_least_distances_are_the_least_over_every_angle(stride):
                        rtol=1e-12, atol=0)  # fmt: skip
     both = segment_distance(b1[:, None], b2[:, None], b1, b2).min(-1)
     assert np.array_equal(least_distances(b1, b2, b1, b2, symmetric=True, stride=stride), both)
-    to_point = least_distances(a1, a1, b1, b2, lambda p, _, s, e: point_segment(p, s, e))
+    to_point = least_distances(a1, a1, b1, b2, to_segment)
     assert np.array_equal(to_point, point_segment(a1[:, None], b1, b2).min(-1))
 
 
