@@ -160,11 +160,26 @@ def sweep(mech: Mechanism, width: float) -> np.ndarray:
     """(N, T, 2) joint paths over a revolution, sampled so finely that no joint moves more than
     SWEEP_STEP link widths between two angles (within MAX_SWEEP_ANGLES)."""
     paths = joint_paths(mech, np.arange(SWEEP_ANGLES) * (2 * np.pi / SWEEP_ANGLES))
-    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    step = largest_step(paths)
     count = min(MAX_SWEEP_ANGLES, int(np.ceil(SWEEP_ANGLES * step / (SWEEP_STEP * width))))
     if count <= SWEEP_ANGLES:
         return paths
     return joint_paths(mech, np.arange(count) * (2 * np.pi / count))
+
+
+def largest_step(paths: np.ndarray) -> float:
+    """The furthest any of the (N, T, 2) points moves between two sampled angles (cyclic)."""
+    return float(np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max())
+
+
+def outlines(
+    assembly: Assembly, paths: np.ndarray, chains: dict[int, list[int]] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (N, T) points of the sweep as complex numbers, and each outline segment's part (E,)
+    and its two ends among them (E, 2): the hull edges of `hull_edges`."""
+    edges = hull_edges(assembly, paths[:, 0], chains)
+    points = paths[..., 0] + 1j * paths[..., 1]
+    return points, np.array([e[0] for e in edges]), np.array([e[1:] for e in edges])
 
 
 def _fixed_apart(points: np.ndarray) -> np.ndarray:
@@ -197,11 +212,8 @@ def find_conflicts(
     """
     chains = chains or {}
     n_parts, n_joints = len(assembly.parts), len(paths)
-    edges = hull_edges(assembly, paths[:, 0], chains)
-    owner = np.array([e[0] for e in edges])
-    points = paths[..., 0] + 1j * paths[..., 1]  # (N, T)
-    start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]  # (E, T)
-    ends = np.array([e[1:] for e in edges])
+    points, owner, ends = outlines(assembly, paths, chains)
+    start, end = points[ends[:, 0]], points[ends[:, 1]]  # (E, T)
     fixed = _fixed_apart(points)
     joined = fixed[ends[:, 0], ends[:, 1]]  # the edges that keep their length
     both = fixed[ends[:, None, :, None], ends[None, :, None]].all((2, 3))  # (E, E): 4 ends
@@ -222,7 +234,7 @@ def find_conflicts(
         inside = to_part[chains.get(p, list(part.joints))].min(0)  # a vertex of p inside q
         distance[p] = np.minimum(distance[p], inside)
         distance[:, p] = np.minimum(distance[:, p], inside)
-    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    step = largest_step(paths)
     width, clearance = sizes.link_width, sizes.clearance
     near = distance < width + clearance + step
     np.fill_diagonal(near, False)

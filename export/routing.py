@@ -18,7 +18,7 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
-from .layers import Layout, find_conflicts, stack_layers
+from .layers import Layout, find_conflicts, largest_step, stack_layers
 from .options import Sizes
 from .parts import Assembly, part_rotations
 from .planar import segment_distance
@@ -167,7 +167,7 @@ def bent_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     `Layout.bends`). A bent link may come near other pins: each round routes every link around
     all the pins that blocked it so far. ValueError as `assign_layers` when no round layers,
     at once when even links clear of every pin they might get around leave no layering."""
-    step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+    step = largest_step(paths)
     reach = (sizes.link_width + sizes.hole_diameter) / 2 + sizes.clearance + 2 * step
     conflicts = find_conflicts(assembly, paths, sizes)
     turns = part_rotations(assembly, paths)

@@ -25,7 +25,16 @@ from itertools import combinations, islice
 
 import numpy as np
 
-from .layers import Conflicts, Layout, NoFlatLayers, Strap, find_conflicts, hull_edges, stack_layers
+from .layers import (
+    Conflicts,
+    Layout,
+    NoFlatLayers,
+    Strap,
+    find_conflicts,
+    largest_step,
+    outlines,
+    stack_layers,
+)
 from .options import Sizes
 from .parts import Assembly
 from .planar import convex_hull, cross, least_distances, point_segment, to_segment
@@ -117,17 +126,15 @@ class _Swept:
     step of a joint between two angles."""
 
     def __init__(self, assembly: Assembly, paths: np.ndarray, joints: list[int]):
-        points = paths[..., 0] + 1j * paths[..., 1]
-        edges = hull_edges(assembly, paths[:, 0])
-        owner = np.array([e[0] for e in edges])
-        start, end = points[[e[1] for e in edges]], points[[e[2] for e in edges]]
+        points, owner, ends = outlines(assembly, paths)
+        start, end = points[ends[:, 0]], points[ends[:, 1]]
         centres = points[joints]
         to_edges = least_distances(centres, centres, start, end, to_segment)  # (S, E)
         self.row = {j: k for k, j in enumerate(joints)}
         self.to_part = np.full((len(joints), len(assembly.parts)), np.inf)
         np.minimum.at(self.to_part, (np.arange(len(joints))[:, None], owner[None]), to_edges)
         self.to_joint = np.abs(centres[:, None] - points[None]).min(-1)  # (S, N)
-        self.step = np.linalg.norm(np.diff(paths, axis=1, append=paths[:, :1]), axis=-1).max()
+        self.step = largest_step(paths)
         self.positions = paths[:, 0]
 
 
