@@ -23,6 +23,7 @@ from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from linkd.verify.analytic import joint_paths
+from linkd.verify.collisions import box_distances, check_collisions, classify_pairs
 from linkd.verify.pose import solve_pose, solve_sweep
 from linkd.verify.runner import verify_output
 
@@ -158,6 +159,28 @@ def test_jansen_export_passes_and_reports(jansen_export: Path, tmp_path: Path) -
     assert checks["kinematics"]["figure"] < 1e-6 and checks["collisions"]["figure"] > 0
     assert written["verification"]["thresholds"]["loop_rtol"] == 1e-6
     print(f"\nJansen leg verified in {report.seconds:.2f} s")
+
+
+def test_least_clearance_is_the_least_over_every_pair_and_pose(jansen_export: Path) -> None:
+    """The clearance check measures pairs nearest box first and stops where no box comes
+    nearer: its figure is still the least of every pair at every pose, and the boxes never
+    come nearer than the parts they hold."""
+    model = mujoco.MjModel.from_xml_path(str(jansen_export / "mechanism.xml"))
+    data = mujoco.MjData(model)
+    poses = solve_sweep(model, data, np.arange(40) * (2 * np.pi / 40))
+    size = 1.0
+    pairs, _ = classify_pairs(model, size)
+    g1, g2 = (np.array([pair[k] for pair in pairs]) for k in (0, 1))
+    least = np.inf
+    for qpos in poses:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        exact = [mujoco.mj_geomDistance(model, data, int(a), int(b), size, None)
+                 for a, b in pairs]  # fmt: skip
+        assert (box_distances(model, data, g1, g2) <= np.array(exact) + 1e-12).all()
+        least = min(least, *exact)
+    check = check_collisions(model, poses, size, None)
+    assert check.figure == least > 0
 
 
 def test_plates_on_one_layer_collide(jansen_export: Path, tmp_path: Path) -> None:

@@ -47,7 +47,7 @@ def simulate(model: Any) -> dict[str, Any]:
     ee = mujoco.mj_name2id(model, obj.mjOBJ_SITE, END_EFFECTOR)
     connects = Connects.of(model, data)
     steps = round((RAMP_S + SETTLE_S) / model.opt.timestep)
-    angle, ends, anchors = [], [], []
+    angle, ends, xpos, xmat = [], [], [], []  # the anchors' bodies' poses, placed at the end
     first_contact = None
     finite = True
     flags = model.opt.disableflags
@@ -73,14 +73,17 @@ def simulate(model: Any) -> dict[str, Any]:
                     break
                 angle.append(data.qpos[crank] - model.qpos0[crank])
                 ends.append(data.site_xpos[ee, :2].copy())
-                anchors.append(connects.points(data)[..., :2])
+                xpos.append(data.xpos[connects.bodies])
+                xmat.append(data.xmat[connects.bodies])
         finally:
             model.opt.disableflags = flags
     counted = sum(int(w.number) for w in data.warning)
+    shape = (len(angle), *connects.bodies.shape)
+    anchors = connects.placed(np.reshape(xpos, (*shape, 3)), np.reshape(xmat, (*shape, 9)))
     return {
         "angle": np.array(angle),
         "end": np.array(ends).reshape(-1, 2),
-        "anchors": np.array(anchors).reshape(len(angle), len(connects.eqs), 2, 2),
+        "anchors": anchors[..., :2],
         "first_contact": first_contact,
         "finite": finite,
         "warnings": messages + ([f"{counted} warning counts in mjData"] if counted else []),

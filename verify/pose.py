@@ -61,8 +61,13 @@ class Connects:
 
     def points(self, data: Any) -> np.ndarray:
         """(E, 2, 3) world positions of both anchors of each equality."""
-        rotation = data.xmat[self.bodies].reshape(*self.bodies.shape, 3, 3)
-        return data.xpos[self.bodies] + np.einsum("epij,epj->epi", rotation, self.local)
+        return self.placed(data.xpos[self.bodies], data.xmat[self.bodies])
+
+    def placed(self, xpos: np.ndarray, xmat: np.ndarray) -> np.ndarray:
+        """(..., E, 2, 3) the anchors in world coordinates for the anchor bodies' (..., E, 2, 3)
+        positions and (..., E, 2, 9) orientations: many recorded states at once."""
+        rotation = xmat.reshape(*xmat.shape[:-1], 3, 3)
+        return xpos + np.einsum("...ij,...j->...i", rotation, self.local)
 
 
 def loop_closure(
@@ -78,10 +83,10 @@ def loop_closure(
     mujoco.mj_comPos(model, data)
     connects = Connects.of(model, data) if connects is None else connects
     points = connects.points(data)
-    jacobian = np.zeros((len(connects.eqs), 2, 3, model.nv))
-    for e, side in np.ndindex(*connects.bodies.shape):
-        body = int(connects.bodies[e, side])
-        mujoco.mj_jac(model, data, jacobian[e, side], None, points[e, side], body)
+    jacobian = np.zeros((points.size // 3, 3, model.nv))
+    for row, body, point in zip(jacobian, connects.bodies.flat, points.reshape(-1, 3)):
+        mujoco.mj_jac(model, data, row, None, point, int(body))
+    jacobian = jacobian.reshape(-1, 2, 3, model.nv)
     residual = (points[:, 0] - points[:, 1]).reshape(-1)
     return residual, (jacobian[:, 0] - jacobian[:, 1]).reshape(-1, model.nv)
 
@@ -101,19 +106,18 @@ def pin_points(model: Any, data: Any) -> dict[int, np.ndarray]:
 
 
 def _newton(
-    model: Any, data: Any, qpos: np.ndarray, free: np.ndarray, tol: float
+    model: Any, data: Any, qpos: np.ndarray, free: np.ndarray, tol: float, connects: Connects
 ) -> tuple[np.ndarray, float, np.ndarray, float]:
     """Drive the loop residual to `tol` (or what rounding allows, far from the origin) over the
     `free` coordinates.
 
     Returns the pose, its residual norm, its loop-closure Jacobian and the tolerance used.
     """
-    connects = Connects.of(model, data)
     residual, jacobian = loop_closure(model, data, qpos, connects)
     tol = max(tol, ROUNDING * float(np.abs(connects.points(data)).max(initial=0.0)))
     error = float(np.linalg.norm(residual))
-    scale = float(np.linalg.norm(jacobian[:, free], 2)) ** 2  # typical size of J'J
-    damping = 0.0
+    scale = float((jacobian[:, free] ** 2).sum())  # typical size of J'J
+    damping, posed = 0.0, True  # posed: `data` holds the kinematics of `qpos`
     for _ in range(MAX_ITER):
         if error <= tol:
             break
@@ -132,7 +136,9 @@ def _newton(
             damping = damping / 10 if damping > 1e-9 * scale else 0.0
         else:  # reject; damp towards gradient descent
             damping = max(10 * damping, 1e-6 * scale)
-    loop_closure(model, data, qpos, connects)
+        posed = trial is qpos
+    if not posed:
+        loop_closure(model, data, qpos, connects)
     return qpos, error, jacobian, tol
 
 
@@ -149,17 +155,24 @@ def solve_pose(
     previous pose of a sweep. Raises ValueError when the loops cannot be closed to `tol`.
     Leaves `data` at the returned pose (kinematics computed).
     """
-    return _solve(model, data, crank_dof(model), crank_angle, qpos0, tol)[0]
+    connects = Connects.of(model, data)
+    return _solve(model, data, crank_dof(model), crank_angle, qpos0, tol, connects)[0]
 
 
 def _solve(
-    model: Any, data: Any, crank: int, angle: float, guess: np.ndarray | None, tol: float
+    model: Any,
+    data: Any,
+    crank: int,
+    angle: float,
+    guess: np.ndarray | None,
+    tol: float,
+    connects: Connects,
 ) -> tuple[np.ndarray, np.ndarray]:
     """solve_pose, also returning the loop-closure Jacobian at the solution."""
     start = np.array(model.qpos0 if guess is None else guess, dtype=np.float64)
     start[crank] = model.qpos0[crank] + angle
     free = np.arange(model.nv) != crank
-    qpos, error, jacobian, tol = _newton(model, data, start, free, tol)
+    qpos, error, jacobian, tol = _newton(model, data, start, free, tol, connects)
     if not error <= tol:
         raise ValueError(
             f"loops do not close at crank angle {angle:.6g} rad (residual {error:.3g} m)"
@@ -191,14 +204,15 @@ def solve_sweep(
     """
     crank = crank_dof(model)
     angles = np.asarray(angles, dtype=np.float64)
-    qpos, jacobian = _solve(model, data, crank, 0.0, None, tol)
+    connects = Connects.of(model, data)
+    qpos, jacobian = _solve(model, data, crank, 0.0, None, tol, connects)
     current = 0.0
     poses = np.zeros((len(angles), model.nq))
     for k, target in enumerate(angles):
         substeps = max(1, int(np.ceil(abs(target - current) / max_step)))
         for angle in np.linspace(current, target, substeps + 1)[1:]:
             guess = qpos + _tangent(jacobian, crank) * (angle - current)
-            qpos, jacobian = _solve(model, data, crank, angle, guess, tol)
+            qpos, jacobian = _solve(model, data, crank, angle, guess, tol, connects)
             current = angle
         poses[k] = qpos
     return poses
