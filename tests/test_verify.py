@@ -161,11 +161,18 @@ def test_jansen_export_passes_and_reports(jansen_export: Path, tmp_path: Path) -
     print(f"\nJansen leg verified in {report.seconds:.2f} s")
 
 
-def test_least_clearance_is_the_least_over_every_pair_and_pose(jansen_export: Path) -> None:
+@pytest.mark.parametrize("flat", [False, True])
+def test_least_clearance_is_the_least_over_every_pair_and_pose(
+    jansen_export: Path, tmp_path: Path, flat: bool
+) -> None:
     """The clearance check measures pairs nearest box first and stops where no box comes
-    nearer: its figure is still the least of every pair at every pose, and the boxes never
-    come nearer than the parts they hold."""
-    model = mujoco.MjModel.from_xml_path(str(jansen_export / "mechanism.xml"))
+    nearer: its figure is still the least of every pair at every pose (the deepest overlap
+    where parts cross: every plate on one layer), and boxes apart hold parts at least as far
+    apart."""
+    folder = planted(jansen_export, tmp_path)
+    if flat:
+        edit_model(folder, _flatten)
+    model = mujoco.MjModel.from_xml_path(str(folder / "mechanism.xml"))
     data = mujoco.MjData(model)
     poses = solve_sweep(model, data, np.arange(40) * (2 * np.pi / 40))
     size = 1.0
@@ -177,22 +184,23 @@ def test_least_clearance_is_the_least_over_every_pair_and_pose(jansen_export: Pa
         mujoco.mj_kinematics(model, data)
         exact = [mujoco.mj_geomDistance(model, data, int(a), int(b), size, None)
                  for a, b in pairs]  # fmt: skip
-        assert (box_distances(model, data, g1, g2) <= np.array(exact) + 1e-12).all()
+        assert (box_distances(model, data, g1, g2) <= np.maximum(exact, 0) + 1e-12).all()
         least = min(least, *exact)
     check = check_collisions(model, poses, size, None)
-    assert check.figure == least > 0
+    assert check.figure == least and (least < 0) == flat
+
+
+def _flatten(root: ET.Element) -> None:
+    """Every plate on the base's layer."""
+    for geom in root.iter("geom"):
+        if geom.get("type") == "mesh":
+            x, y, _ = geom.get("pos", "0 0 0").split()
+            geom.set("pos", f"{x} {y} 0")
 
 
 def test_plates_on_one_layer_collide(jansen_export: Path, tmp_path: Path) -> None:
     folder = planted(jansen_export, tmp_path)
-
-    def flatten(root: ET.Element) -> None:
-        for geom in root.iter("geom"):
-            if geom.get("type") == "mesh":
-                x, y, _ = geom.get("pos", "0 0 0").split()
-                geom.set("pos", f"{x} {y} 0")
-
-    edit_model(folder, flatten)
+    edit_model(folder, _flatten)
     report = verify_output(folder)
     assert not report.passed and "collisions" in report.failed
     collisions = next(c for c in report.checks if c.name == "collisions")

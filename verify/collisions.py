@@ -109,8 +109,8 @@ def check_collisions(
         bounds[t] = box_distances(model, data, g1, g2)
     least, where, posed = np.inf, None, None
     for t, k in zip(*np.unravel_index(np.argsort(bounds, axis=None, kind="stable"), bounds.shape)):
-        if bounds[t, k] >= least:
-            break  # no pair left can come nearer than the least found
+        if 0 < bounds[t, k] >= least:
+            break  # no pair left can come nearer (boxes that meet may hold parts that cross)
         if t != posed:
             data.qpos[:] = poses[t]
             mujoco.mj_kinematics(model, data)
