@@ -29,8 +29,7 @@ its joints, a bracket in each direction at each ground pin) are swept once; each
 layered from its share of them, the fewest brackets first, then the fewest split plates,
 stars first; only where no star layers are the cuts along the plates' own links searched,
 with a search budget of their own. A choice is not searched when the same split plates with
-no ground pins at all (a looser problem than any bracket, base, cover or stubs) are proved not
-to layer.
+no ground pins at all (a looser problem than any bracket, base, cover or stubs) do not layer.
 """
 
 from __future__ import annotations
@@ -82,11 +81,8 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         layout = stack_layers(chosen, share, sizes, stubs=True, whole=shafts, fewest=not relaxed)
         return layout, keep, chosen
 
-    try:  # every plate left out, no ground pin at all: looser than any choice
-        layered({q: () for q in plates}, (), relaxed=True)
-    except NoFlatLayers as exc:
-        if exc.proved:
-            raise
+    # every plate left out, no ground pin at all: looser than any choice (NoFlatLayers if not)
+    layered({q: () for q in plates}, (), relaxed=True)
     stars = {q: _stars(assembly.parts[q]) for q in plates}
     ways = {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0]) for q in plates}
     helds = [c for r in range(len(ground) + 1) for c in combinations(ground, r)]
@@ -113,30 +109,28 @@ def _first(
 ) -> tuple[tuple | None, ValueError | None]:
     """The first of `layered(split, held)` that layers, over the ground pins `helds` on brackets
     (the fewest first) and `splits()`, within `budget` layer searches (`spent` of them
-    already): first the splits that layer with no ground pins at all (a looser problem than
-    any bracket, base, cover or stubs), then those whose search gave up. With it, the first
-    refusal."""
-    loose: dict[int, bool | None] = {}  # a split layers with no ground pins (None: unknown)
+    already), trying only the splits that layer with no ground pins at all (a looser problem
+    than any bracket, base, cover or stubs). With it, the first refusal."""
+    loose: dict[int, bool] = {}  # a split layers with no ground pins
     searches, refusal = spent, None
-    for bound in (True, None):
-        for held in helds:
-            for k, split in enumerate(splits()):
-                if searches >= budget:
-                    return None, refusal
-                if k not in loose:
-                    searches += 1
-                    try:
-                        layered(split, (), relaxed=True)
-                        loose[k] = True
-                    except NoFlatLayers as exc:
-                        loose[k], refusal = False if exc.proved else None, refusal or exc
-                if loose[k] is not bound:
-                    continue
+    for held in helds:
+        for k, split in enumerate(splits()):
+            if searches >= budget:
+                return None, refusal
+            if k not in loose:
                 searches += 1
                 try:
-                    return layered(split, held), refusal
-                except ValueError as exc:
-                    refusal = refusal or exc
+                    layered(split, (), relaxed=True)
+                    loose[k] = True
+                except NoFlatLayers as exc:
+                    loose[k], refusal = False, refusal or exc
+            if not loose[k]:
+                continue
+            searches += 1
+            try:
+                return layered(split, held), refusal
+            except ValueError as exc:
+                refusal = refusal or exc
     return None, refusal
 
 

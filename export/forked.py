@@ -85,7 +85,7 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
             return problem, _layered(problem, union, conflicts, sizes, fewest=not relaxed)
         except NoFlatLayers as exc:
             refusal = refusal or exc
-            if relaxed and exc.proved:
+            if relaxed:
                 forks.remove(fork)
             return None
 

@@ -32,14 +32,7 @@ from .braced import POST_MARGIN
 from .layers import Arm, Conflicts, Fork, Layout, find_conflicts, least_gap
 from .options import Sizes
 from .parts import Assembly, Part, Pin
-from .stacking import (
-    SEARCH_BUDGET,
-    PinState,
-    StackSearch,
-    chromatic_number,
-    find_order,
-    stack_in_order,
-)
+from .stacking import PinState, fewest_layers, find_order, stack_in_order
 
 POSTS = 3  # posts holding the frames, evenly round the motor's pivot
 
@@ -223,17 +216,12 @@ def _stack(
             pins.append((members, blocked))
     conflict = conflicts.parts[np.ix_(own, own)]
     grounded, cover = set(range(len(arms))), set(range(1, len(arms)))
-    order, proved = find_order(PinState(len(own), pins, grounded, cover), conflict)
+    order = find_order(PinState(len(own), pins, grounded, cover), conflict)
     if order is None:
         names = ", ".join(union.parts[q].name for q in own[len(arms) :])
-        searched = "" if proved else f" within {SEARCH_BUDGET} nodes"
-        raise ValueError(f"the module of {names} has no layering between two frames{searched}")
-    layers = stack_in_order(conflict, order)
-    for count in range(chromatic_number(conflict)[0], max(layers)):
-        found = StackSearch(conflict, PinState(len(own), pins, grounded, cover)).run(count)
-        if found is not None:
-            layers = found
-            break
+        raise ValueError(f"the module of {names} has no layering between two frames")
+    state = PinState(len(own), pins, grounded, cover)
+    layers = fewest_layers(conflict, state, stack_in_order(conflict, order))
     return {q: layers[local[q]] for q in own}, max(layers)
 
 

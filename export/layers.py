@@ -4,7 +4,7 @@ The analytic kinematics sweeps a full crank revolution. A part's outline is the 
 its joints grown by half the link width, so two parts may share a layer only if their hulls stay
 a width plus the clearance apart at every angle. A pin crosses every layer between the outermost
 parts it joins, so a part that comes near a pin may not sit on those layers. The conflict graph
-is coloured with as few layers as a small exact search finds.
+is coloured with as few layers as can keep every pin clear (`stacking`).
 
 The ground is a base plate under the stack of moving parts: the pins of ground joints stand in
 it. When no order of the stack lets every such pin reach up clear of the others, some pins hang
@@ -28,14 +28,7 @@ from linkd.mechanism import Mechanism
 from .options import Sizes
 from .parts import Assembly, joint_paths
 from .planar import convex_hull, cross, least_distances, to_segment
-from .stacking import (
-    SEARCH_BUDGET,
-    PinState,
-    StackSearch,
-    chromatic_number,
-    find_order,
-    stack_in_order,
-)
+from .stacking import PinState, fewest_layers, find_order, stack_in_order
 
 SWEEP_ANGLES = 720  # crank angles of a first sweep
 MAX_SWEEP_ANGLES = 8192
@@ -52,11 +45,7 @@ class Arm:
 
 
 class NoFlatLayers(ValueError):
-    """No order of flat layers keeps every pin clear; `proved` unless the search ran out."""
-
-    def __init__(self, message: str, proved: bool):
-        super().__init__(message)
-        self.proved = proved
+    """No order of flat layers keeps every pin clear (proved)."""
 
 
 @dataclass(frozen=True)
@@ -114,7 +103,7 @@ class Layout:
     top_joints: tuple[int, ...]  # ground joints held by a cover plate on the top layer
     count: int  # number of layers, base and cover plates included
     min_gap: float  # least in-plane gap between the outlines of parts on one layer (inf if none)
-    minimal: bool = True  # the search proved that fewer layers cannot work
+    minimal: bool = True  # fewer layers cannot work (proved; False where not searched)
     bends: dict[int, np.ndarray] = field(default_factory=dict)  # bent links' waypoints (routing)
     arms: dict[int, tuple[Arm, ...]] = field(default_factory=dict)  # split parts (`braced`)
     brackets: tuple[Bracket, ...] = ()  # ground pins held between the layers (`braced`)
@@ -248,13 +237,13 @@ def find_conflicts(
 
 
 def assign_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """The layer of every part, with as few layers as the search finds.
+    """The layer of every part, with as few layers as can be.
 
     Layer 0 is the ground's base plate, under the stack of moving parts (layers 1..K). Each
     ground joint's pin stands in the base and reaches up to its highest part; where no order
     of the parts allows that, some pins hang from a cover plate over the stack instead (layer
     K + 1). First an order of the parts that keeps every pin clear is found (or the mechanism
-    cannot be built flat: ValueError), then the fewest layers the search can reach.
+    cannot be built flat: ValueError), then the fewest layers.
     """
     return stack_layers(assembly, find_conflicts(assembly, paths, sizes), sizes)
 
@@ -269,9 +258,9 @@ def stack_layers(
 ) -> Layout:
     """The layers of `assign_layers` for given conflicts (ValueError as there). stubs: the
     parts of each ground pin but those `whole` (a split part's shaft) may be held from either
-    plate (`braced`), which is looser than any cover choice. It is searched first (proved
-    impossible, nothing else need be); then every pin in the base, and failing that the
-    stubs' order is taken. fewest: search for the fewest layers; without it, the first order's
+    plate (`braced`), which is looser than any cover choice. It is searched first (where it
+    cannot work, nothing else can); then every pin in the base, and failing that the stubs'
+    order is taken. fewest: search for the fewest layers; without it, the first order's
     layers (a check whether any layering exists, as the bounds of the costlier constructions
     ask, skips that search)."""
     moving = conflicts.parts[1:, 1:]
@@ -282,38 +271,31 @@ def stack_layers(
     grounded = {k for k, pin in enumerate(assembly.pins) if 0 in pin.members}
     covers = [set(c) for r in range(len(grounded) + 1) for c in combinations(sorted(grounded), r)]
     covers = covers[: 1 + MAX_COVER_TRIES]  # no cover first, then the smallest
-    loose, proved = None, True
+    loose = None
     if stubs and grounded:  # stubs can do what a cover does: besides them only the base is tried
-        loose, done = find_order(_pin_state(len(moving), pins, grounded, None, whole), moving)
-        if loose is None and done:
-            _refuse(proved=True)
-        covers, proved = covers[:1], False  # the base's refusal proves nothing about stubs
+        loose = find_order(_pin_state(len(moving), pins, grounded, None, whole), moving)
+        if loose is None:
+            _refuse()
+        covers = covers[:1]
     for cover in covers:
-        order, done = find_order(_pin_state(len(moving), pins, grounded, cover, whole), moving)
+        order = find_order(_pin_state(len(moving), pins, grounded, cover, whole), moving)
         if order is not None:
             break
-        proved &= done
     else:
         if loose is None:
-            _refuse(proved)
+            _refuse()
         order, cover = loose, None
     layers = stack_in_order(moving, order)
-    least, minimal = chromatic_number(moving) if fewest else (max(layers), False)
-    for stack in range(least, max(layers)):
-        search = StackSearch(moving, _pin_state(len(moving), pins, grounded, cover, whole))
-        found = search.run(stack)
-        if found is not None:
-            layers = found
-            break
-        minimal &= search.nodes <= SEARCH_BUDGET
-    return _layout(assembly, conflicts, sizes, layers, cover, max(layers), minimal)
+    if fewest:
+        state = _pin_state(len(moving), pins, grounded, cover, whole)
+        layers = fewest_layers(moving, state, layers)
+    return _layout(assembly, conflicts, sizes, layers, cover, max(layers), fewest)
 
 
-def _refuse(proved: bool) -> NoReturn:
+def _refuse() -> NoReturn:
     raise NoFlatLayers(
         "cannot be built from flat layers: some parts pass over pins whose plates lie above and "
-        f"below them, in every order {'tried' if proved else 'the search could try'}",
-        proved,
+        "below them, in every order"
     )
 
 

@@ -17,9 +17,8 @@ def why_refused(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> str:
     """Pins that alone cannot all be kept clear with whole, straight parts, each with the parts
     passing it that keep it so: "pin_1 (passed by link_2_3) and pin_4 (passed by ...)", or the
     pins alone where there are more than MAX_PINS of them or more than MAX_NAMED such parts;
-    "" when the whole set is not proved impossible. No pin and no named part can be left out:
-    each is dropped in turn while the rest stay proved impossible. Layer searches of a few pins
-    each: milliseconds to seconds."""
+    "" when the whole set layers. No pin and no named part can be left out: each is dropped in
+    turn while the rest stay impossible. Layer searches of a few pins each: milliseconds."""
     blocked = dict(enumerate(conflicts.blocked))  # pin index -> the parts kept off it
     if not _impossible(assembly, conflicts, sizes, blocked):
         return ""
@@ -45,13 +44,13 @@ def why_refused(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> str:
 def _impossible(
     assembly: Assembly, conflicts: Conflicts, sizes: Sizes, blocked: dict[int, list[int]]
 ) -> bool:
-    """Is no stack proved to keep the pins `blocked` (index -> the parts kept off it) clear?"""
+    """Does no stack keep the pins `blocked` (index -> the parts kept off it) clear?"""
     chosen = replace(assembly, pins=[assembly.pins[k] for k in blocked])
     try:
         stack_layers(chosen, replace(conflicts, blocked=list(blocked.values())), sizes,
                      fewest=False)  # fmt: skip
-    except NoFlatLayers as exc:
-        return exc.proved
+    except NoFlatLayers:
+        return True
     return False
 
 

@@ -1,15 +1,18 @@
-"""Searches that stack parts into layers: plain colouring, a pin-safe order, fewest layers.
+"""Stacking parts into layers: a pin-safe order, then the fewest layers.
 
 The parts are placed bottom up. Pairwise conflicts keep two parts off one layer; a pin keeps
-the parts that come near it out of the layers between its outermost plates. Budgets bound the
-depth-first searches (in nodes), so an answer always comes quickly, proved or not.
+the parts that come near it out of the layers between its outermost plates. Whether an order
+exists, and how few layers will do, are settled exactly (`exact`); a budgeted depth-first
+search finds the order itself, where it can, since its orders stack compactly.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-SEARCH_BUDGET = 5_000  # search nodes (or dead ends) per try before settling for more layers
+from .exact import exact_order, exact_stack
+
+SEARCH_BUDGET = 5_000  # dead ends the depth-first search meets before the solver's order is taken
 
 
 class PinState:
@@ -18,7 +21,9 @@ class PinState:
     A pin is open from when the first of its plates is placed until the last one is; a part
     that comes near it cannot be placed while it is open (it would sit between the pin's
     plates; a part on the layer of one of them conflicts with it anyway). A pin standing in the
-    base is open from the start; one hanging from the cover never closes.
+    base is open from the start; one hanging from the cover never closes. `rules` says the same
+    for the exact searches: each pin as (its plates, the parts kept off it, "between", "after"
+    (in the base) or "before" (from the cover)).
     """
 
     def __init__(self, n: int, pins: list, grounded: set[int], cover: set[int]):
@@ -33,6 +38,11 @@ class PinState:
                     self.blocking[b] += 1
         self.layer = [0] * n  # 0: not placed yet
         self.left = n
+        self.rules = [
+            ([p for p in range(n) if p in members], [b for b in blocked if b not in members],
+             "between" if k not in grounded else "before" if k in cover else "after")
+            for k, (members, blocked) in enumerate(pins)
+        ]  # fmt: skip
 
     def is_open(self, pin: int) -> bool:
         return 0 < self.placed[pin] < self.total[pin]
@@ -72,13 +82,23 @@ class PinState:
         return score
 
 
-def find_order(state: PinState, conflict: np.ndarray) -> tuple[list[int] | None, bool]:
-    """An order in which every part can be placed bottom up (or None), and whether the answer
-    is proved (the search finished within its budget).
+def find_order(state: PinState, conflict: np.ndarray) -> list[int] | None:
+    """An order in which every part of a fresh `state` can be placed bottom up, or None: there
+    is none. A SAT solver settles whether one exists (`exact`); where one does, a depth-first
+    search looks for it, since its orders stack compactly, and the solver's is taken where
+    that search gives up within its budget."""
+    exact = exact_order(len(state.layer), state.rules)
+    if exact is None:
+        return None
+    return _depth_first(state, conflict) or exact
 
-    Depth first, preferring parts that fit on the layer being filled (see `stack_in_order`),
-    then parts that close pins rather than open them. Which pins are open depends only on the
-    set of parts placed, so a set that led nowhere is never expanded again.
+
+def _depth_first(state: PinState, conflict: np.ndarray) -> list[int] | None:
+    """An order in which every part can be placed bottom up, or None within the budget.
+
+    Preferring parts that fit on the layer being filled (see `stack_in_order`), then parts
+    that close pins rather than open them. Which pins are open depends only on the set of parts
+    placed, so a set that led nowhere is never expanded again.
     """
     clashes = [sum(1 << q for q in np.flatnonzero(row)) for row in conflict]  # as bit sets
     dead: set[int] = set()
@@ -101,8 +121,7 @@ def find_order(state: PinState, conflict: np.ndarray) -> tuple[list[int] | None,
         dead.add(placed)
         return False
 
-    found = extend(0, 0)
-    return (order if found else None), found or len(dead) <= SEARCH_BUDGET
+    return order if extend(0, 0) else None
 
 
 def stack_in_order(conflict: np.ndarray, order: list[int]) -> list[int]:
@@ -118,54 +137,18 @@ def stack_in_order(conflict: np.ndarray, order: list[int]) -> list[int]:
     return layers
 
 
-def chromatic_number(conflict: np.ndarray) -> tuple[int, bool]:
-    """Fewest colours of a graph (the layers that pins aside would need), and whether proved."""
-    neighbours = [np.flatnonzero(row).tolist() for row in conflict]
-    proved = True
-    for count in range(_clique(conflict), len(conflict) + 1):
-        found, done = _colourable(neighbours, count)
-        if found:
-            return count, proved
-        proved &= done
-    return max(len(conflict), 1), proved
-
-
-def _colourable(neighbours: list[list[int]], count: int) -> tuple[bool, bool]:
-    """Can the graph take `count` colours? (answer, whether proved within the budget)
-
-    Depth first, most constrained vertex first (DSatur order); a new colour is only ever the
-    next unused one, since colours are interchangeable.
-    """
-    n = len(neighbours)
-    colour = [-1] * n
-    nodes = 0
-
-    def free(p: int) -> list[int]:
-        used = {colour[q] for q in neighbours[p]}
-        return [c for c in range(count) if c not in used]
-
-    def colour_rest(left: int) -> bool:
-        nonlocal nodes
-        nodes += 1
-        if left == 0 or nodes > SEARCH_BUDGET:
-            return left == 0
-        p = min((q for q in range(n) if colour[q] < 0),
-                key=lambda q: (len(free(q)), -len(neighbours[q])))  # fmt: skip
-        for c in free(p):
-            if c > max(colour) + 1:
-                break
-            colour[p] = c
-            if colour_rest(left - 1):
-                return True
-        colour[p] = -1
-        return False
-
-    found = colour_rest(n)
-    return found, found or nodes <= SEARCH_BUDGET
+def fewest_layers(conflict: np.ndarray, state: PinState, layers: list[int]) -> list[int]:
+    """The fewest layers that keep every pin of `state` clear, fewer than `layers` if any
+    (`exact.exact_stack`, from a clique's size up: no fewer can work)."""
+    for stack in range(_clique(conflict), max(layers, default=0)):
+        found = exact_stack(conflict, state.rules, stack)
+        if found is not None:
+            return found
+    return layers
 
 
 def _clique(conflict: np.ndarray) -> int:
-    """Size of a clique found greedily: fewer colours than that cannot work."""
+    """Size of a clique found greedily: fewer layers than that cannot work."""
     degree = conflict.sum(1)
     best = 1
     for v in range(len(conflict)):
@@ -175,38 +158,3 @@ def _clique(conflict: np.ndarray) -> int:
                 clique.append(u)
         best = max(best, len(clique))
     return best
-
-
-class StackSearch:
-    """Build a stack of `stack` layers bottom up, layer by layer, depth first.
-
-    Within a layer, parts are added in a fixed order (most conflicts first), so every stack is
-    met once; a layer is closed when nothing more fits, or to try the other choices.
-    """
-
-    def __init__(self, conflict: np.ndarray, state: PinState):
-        self.neighbours = [np.flatnonzero(row).tolist() for row in conflict]
-        self.order = sorted(range(len(conflict)), key=lambda p: (-len(self.neighbours[p]), p))
-        self.state = state
-        self.nodes = 0
-
-    def run(self, stack: int) -> list[int] | None:
-        """Layers 1..stack of the parts, or None (`nodes` tells whether that is proved)."""
-        self.stack = stack
-        return list(self.state.layer) if self._fill(1, -1) else None
-
-    def _fill(self, level: int, last: int) -> bool:
-        """Add to layer `level` a part after position `last` of the order, or close the layer."""
-        state = self.state
-        self.nodes += 1
-        if state.left == 0 or self.nodes > SEARCH_BUDGET:
-            return state.left == 0
-        for i in range(last + 1, len(self.order)):
-            p = self.order[i]
-            if not state.free(p) or any(state.layer[q] == level for q in self.neighbours[p]):
-                continue
-            state.place(p, level)
-            if self._fill(level, i):
-                return True
-            state.place(p, level, -1)
-        return last >= 0 and level < self.stack and self._fill(level + 1, -1)

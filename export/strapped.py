@@ -53,7 +53,7 @@ def strapped_layers(
     loose = [[q for q in near if not any(k in freed[s] and q == s.part for s in options)]
              for k, near in enumerate(conflicts.blocked)]  # fmt: skip
     if not options or _layered(assembly, replace(conflicts, blocked=loose), sizes) is None:
-        raise NoFlatLayers("no strap frees the pins that keep the stack from layering", False)
+        raise NoFlatLayers("no strap frees the pins that keep the stack from layering")
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
     choices = [(s,) for s in ranked] + list(combinations(ranked, 2))
     swept = _Swept(assembly, paths, sorted({s.joint for s in options}))
@@ -64,7 +64,7 @@ def strapped_layers(
         if layout is not None:
             straps = tuple(_passing(assembly, paths[:, 0], sizes, layout, s) for s in chosen)
             return replace(layout, straps=straps)
-    raise NoFlatLayers("no strap tried lets the stack layer", False)
+    raise NoFlatLayers("no strap tried lets the stack layer")
 
 
 def _candidates(
@@ -175,14 +175,12 @@ def _with_straps(
 
 def _layered(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout | None:
     """Layers with every ground pin whole, else held from both plates; None if neither. The
-    stubs' search goes first: it is looser than any whole layering, so where it is proved
-    impossible (as for most strap choices) the whole pins' costlier search is spared."""
+    stubs' search goes first: it is looser than any whole layering, so where it finds none
+    (as for most strap choices) the whole pins' search is spared."""
     try:
         held = stack_layers(assembly, conflicts, sizes, stubs=True)
-    except NoFlatLayers as refused:
-        if refused.proved:
-            return None
-        held = None
+    except NoFlatLayers:
+        return None
     try:
         return stack_layers(assembly, conflicts, sizes)
     except NoFlatLayers:
