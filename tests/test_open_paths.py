@@ -65,6 +65,34 @@ def test_bad_paths_are_refused():
     checked_path("t.csv", stem, "open")
 
 
+def test_sub_arcs_are_read_at_equal_arc_length():
+    """A circle sampled unevenly by crank angle: each sub-arc's points, wrapping past the end of
+    the revolution or not, lie on it, equally spaced along it, from the sub-arc's start to its
+    end (to the chords' sag between samples)."""
+    import torch
+
+    from linkd.design.stroke import _along, _arc_table
+
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    angle = t + 0.5 * np.sin(t)  # the crank's samples crowd where the angle turns slowly
+    paths = torch.tensor(np.stack([np.cos(angle), np.sin(angle)], -1)[None], dtype=torch.float32)
+    begin, length = np.array([0.0, 200.5, 64.0]), np.array([128.0, 100.0, 256.0])
+    points = _along(
+        *_arc_table(paths),
+        torch.tensor(begin[None], dtype=torch.float32),
+        torch.tensor(length[None], dtype=torch.float32),
+        torch.linspace(0, 1, 32),
+    )
+    points = points.numpy()[0].astype(complex)  # fmt: skip
+    assert np.allclose(np.abs(points), 1, atol=5e-4)
+    steps = np.angle(points[:, 1:] / points[:, :-1])
+    assert np.allclose(steps, steps.mean(1, keepdims=True), rtol=1e-2, atol=1e-4)
+    unrolled = np.append(angle, 2 * np.pi)  # the angle at index k, cyclic
+    for k, (first, span) in enumerate(zip(begin, length)):
+        ends = [np.interp(i % 256, np.arange(257), unrolled) for i in (first, first + span)]
+        assert np.allclose(points[k, [0, -1]], np.exp(1j * np.array(ends)), atol=5e-4)
+
+
 def test_crank_range_in_mechanism_json(tmp_path):
     mech = classic.crank_rocker().replace(crank_range=(1.0, 3.5))
     mech.save(tmp_path / "m.json")

@@ -33,6 +33,7 @@ PHASES = 64  # phases per revolution (closed timed targets)
 SPANS = tuple(np.linspace(0.1, 1.0, 13))  # sub-arc spans, fractions of a revolution
 REFINE_STEPS, REFINE_LEVELS = 7, 2  # finer grids: steps per side and how many
 MATCH_POINTS = 32  # points per sub-arc and target in the search
+ARC_SAMPLES = 1024  # points per revolution, equally spaced by arc length, sub-arcs are read at
 SCORE_POINTS = 64  # points per placed stroke when ranking
 MAX_REACH = 30.0  # joints placed further than this from the target centroid are penalised
 CHUNK = 128  # candidates searched at a time
@@ -144,7 +145,8 @@ def _search(paths: torch.Tensor, joints: torch.Tensor, target: torch.Tensor, goa
     length = spans.repeat(len(starts)).to(paths.dtype).expand(B, -1)
     fraction = goal.fractions(m, paths)
     z = torch.complex(target[:, 0], target[:, 1])
-    score, gain, centre = _fit(paths, joints, z, begin, length, fraction, goal.timed)
+    table = None if goal.timed else _arc_table(paths)
+    score, gain, centre = _fit(paths, joints, z, begin, length, fraction, table)
     rows = torch.arange(B)
     nudge = torch.linspace(-0.5, 0.5, REFINE_STEPS, dtype=paths.dtype)
     start_step = T / (PHASES if goal.periodic else STARTS)
@@ -153,7 +155,7 @@ def _search(paths: torch.Tensor, joints: torch.Tensor, target: torch.Tensor, goa
         best = score.amin(1).argmin(1)
         begin = begin[rows, best, None] + start_step * nudge.repeat_interleave(len(nudge))
         length = (length[rows, best, None] + span_step * nudge.repeat(len(nudge))).clamp(1, T)
-        score, gain, centre = _fit(paths, joints, z, begin, length, fraction, goal.timed)
+        score, gain, centre = _fit(paths, joints, z, begin, length, fraction, table)
         start_step, span_step = (step / (REFINE_STEPS - 1) for step in (start_step, span_step))
     best = score.reshape(B, -1).argmin(1)
     mirrored, arc = best // begin.shape[1], best % begin.shape[1]
@@ -167,15 +169,15 @@ def _search(paths: torch.Tensor, joints: torch.Tensor, target: torch.Tensor, goa
     return gain.abs(), gain / gain.abs().clamp_min(1e-30), shift, crank
 
 
-def _fit(paths, joints, z, begin, length, fraction, timed: bool) -> tuple:
+def _fit(paths, joints, z, begin, length, fraction, table: tuple | None) -> tuple:
     """Score (B, 2, A), gain (scale and rotation as one complex number) and sub-arc centre of
     every sub-arc [begin, begin + length] (B, A) fitted onto the target z (m,) in order,
-    walked forwards and (mirrored) backwards."""
-    if timed:
-        where = begin[..., None] + length[..., None] * fraction  # (B, A, m)
+    walked forwards and (mirrored) backwards: at equal crank steps when timed (`table` None),
+    else at equal arc length (`table`: `_arc_table` of the paths)."""
+    if table is None:
+        points = _at(paths, begin[..., None] + length[..., None] * fraction)  # (B, A, m)
     else:
-        where = _arc_positions(paths, begin, length, fraction)
-    points = _at(paths, where)  # (B, A, m) complex
+        points = _along(*table, begin, length, fraction)
     m = len(z)
     z = z - z.mean()
     scores, gains, centres = [], [], []
@@ -201,21 +203,36 @@ def _square(z: torch.Tensor) -> torch.Tensor:
     return z.real**2 + z.imag**2
 
 
-def _arc_positions(paths: torch.Tensor, begin: torch.Tensor, length: torch.Tensor,
-                   fraction: torch.Tensor) -> torch.Tensor:  # fmt: skip
-    """(B, A, m) fractional path indices of m points equally spaced by arc length along each
-    sub-arc [begin, begin + length] (index units, wrapping round the revolution)."""
+def _arc_table(paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each closed path (B, T, 2) read by arc length: its arc length at each sample over two
+    revolutions (B, 2T + 1), and ARC_SAMPLES + 1 points equally spaced by it round one, as
+    complex numbers (B, ARC_SAMPLES + 1; the last is the first). Sub-arcs are then read from
+    the even points, not searched for in the samples one by one."""
     B, T, _ = paths.shape
     step = (paths.roll(-1, 1) - paths).norm(dim=-1)  # (B, T): from sample k to k + 1
     cum = torch.cat([torch.zeros(B, 1, dtype=paths.dtype), step.repeat(1, 2).cumsum(1)], 1)
+    want = cum[:, T : T + 1] * torch.linspace(0, 1, ARC_SAMPLES + 1, dtype=paths.dtype)
+    k = torch.searchsorted(cum[:, : T + 1].contiguous(), want, right=True).clamp(1, T)
+    lo, hi = cum.gather(1, k - 1), cum.gather(1, k)
+    index = (k - 1) + (want - lo) / (hi - lo).clamp_min(1e-18)
+    return cum, _at(paths, index[:, None])[:, 0]
+
+
+def _along(cum: torch.Tensor, even: torch.Tensor, begin: torch.Tensor, length: torch.Tensor,
+           fraction: torch.Tensor) -> torch.Tensor:  # fmt: skip
+    """(B, A, m) points equally spaced by arc length along each sub-arc [begin, begin + length]
+    (index units, wrapping round the revolution) of the paths of `_arc_table` (cum, even)."""
+    T = (cum.shape[1] - 1) // 2
     first = _interp_index(cum, begin % T)  # arc length at each sub-arc's start
     last = _interp_index(cum, begin % T + length)
     want = first[..., None] + (last - first)[..., None] * fraction  # (B, A, m)
-    flat = want.reshape(B, -1).contiguous()
-    k = torch.searchsorted(cum.contiguous(), flat, right=True).clamp(1, 2 * T)
-    lo, hi = cum.gather(1, k - 1), cum.gather(1, k)
-    index = (k - 1) + (flat - lo) / (hi - lo).clamp_min(1e-18)
-    return index.reshape(want.shape)
+    where = want * (ARC_SAMPLES / cum[:, T, None, None].clamp_min(1e-18))
+    low = where.floor()
+    frac = where - low
+    low = low.long() % ARC_SAMPLES
+    flat = low.reshape(len(even), -1)
+    p0, p1 = even.gather(1, flat), even.gather(1, flat + 1)
+    return (p0 + frac.reshape(flat.shape) * (p1 - p0)).reshape(want.shape)
 
 
 def _interp_index(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
