@@ -27,10 +27,7 @@ def exact_order(n: int, rules: list[tuple]) -> list[int] | None:
     or None: none exists."""
     if n <= 1:
         return list(range(n))
-    index = np.zeros((n, n), int)  # the literal "p before q"
-    i, j = np.triu_indices(n, 1)
-    index[i, j] = np.arange(1, len(i) + 1)
-    index[j, i] = -index[i, j]
+    index = _pairs(n)
     clauses = [*_transitive(n)]
     for members, blocked, rule in rules:
         for b in blocked:
@@ -44,7 +41,7 @@ def exact_order(n: int, rules: list[tuple]) -> list[int] | None:
     with Solver(name=SOLVER, bootstrap_with=clauses) as solver:
         if not solver.solve():
             return None
-        true = np.zeros(len(i) + 1, bool)
+        true = np.zeros(n * (n - 1) // 2 + 1, bool)
         model = np.array(solver.get_model() or [], int)
         true[model[model > 0]] = True
     before = np.where(index > 0, true[np.abs(index)], ~true[np.abs(index)]) & (index != 0)
@@ -52,14 +49,22 @@ def exact_order(n: int, rules: list[tuple]) -> list[int] | None:
 
 
 @lru_cache(maxsize=8)
-def _transitive(n: int) -> tuple[list[int], ...]:
-    """Clauses making "p before q" (p < q: literal k, else -k) a total order of n parts: no
-    cycle of three (enough in a tournament)."""
-    if n < 3:
-        return ()
+def _pairs(n: int) -> np.ndarray:
+    """(n, n) the literal "p before q": k numbering the pairs p < q, -k for p > q (0: p = q)."""
     index = np.zeros((n, n), int)
     i, j = np.triu_indices(n, 1)
     index[i, j] = np.arange(1, len(i) + 1)
+    index[j, i] = -index[i, j]
+    return index
+
+
+@lru_cache(maxsize=8)
+def _transitive(n: int) -> tuple[list[int], ...]:
+    """Clauses making the literals of `_pairs` a total order of n parts: no cycle of three
+    (enough in a tournament)."""
+    if n < 3:
+        return ()
+    index = _pairs(n)
     a, b, c = np.array(list(combinations(range(n), 3))).T
     ab, bc, ac = index[a, b], index[b, c], index[a, c]
     return tuple(np.concatenate([np.stack([-ab, -bc, ac], 1),

@@ -216,11 +216,11 @@ def _stack(
             pins.append((members, blocked))
     conflict = conflicts.parts[np.ix_(own, own)]
     grounded, cover = set(range(len(arms))), set(range(1, len(arms)))
-    order = find_order(PinState(len(own), pins, grounded, cover), conflict)
+    state = PinState(len(own), pins, grounded, cover)
+    order = find_order(state, conflict)
     if order is None:
         names = ", ".join(union.parts[q].name for q in own[len(arms) :])
         raise ValueError(f"the module of {names} has no layering between two frames")
-    state = PinState(len(own), pins, grounded, cover)
     layers = fewest_layers(conflict, state, stack_in_order(conflict, order))
     return {q: layers[local[q]] for q in own}, max(layers)
 

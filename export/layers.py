@@ -271,23 +271,24 @@ def stack_layers(
     grounded = {k for k, pin in enumerate(assembly.pins) if 0 in pin.members}
     covers = [set(c) for r in range(len(grounded) + 1) for c in combinations(sorted(grounded), r)]
     covers = covers[: 1 + MAX_COVER_TRIES]  # no cover first, then the smallest
-    loose = None
+    loose = None  # the stubs' order and pins
     if stubs and grounded:  # stubs can do what a cover does: besides them only the base is tried
-        loose = find_order(_pin_state(len(moving), pins, grounded, None, whole), moving)
-        if loose is None:
+        state = _pin_state(len(moving), pins, grounded, None, whole)
+        loose = find_order(state, moving), state
+        if loose[0] is None:
             _refuse()
         covers = covers[:1]
     for cover in covers:
-        order = find_order(_pin_state(len(moving), pins, grounded, cover, whole), moving)
+        state = _pin_state(len(moving), pins, grounded, cover, whole)
+        order = find_order(state, moving)
         if order is not None:
             break
     else:
         if loose is None:
             _refuse()
-        order, cover = loose, None
+        (order, state), cover = loose, None
     layers = stack_in_order(moving, order)
     if fewest:
-        state = _pin_state(len(moving), pins, grounded, cover, whole)
         layers = fewest_layers(moving, state, layers)
     return _layout(assembly, conflicts, sizes, layers, cover, max(layers), fewest)
 

@@ -138,8 +138,9 @@ def stack_in_order(conflict: np.ndarray, order: list[int]) -> list[int]:
 
 
 def fewest_layers(conflict: np.ndarray, state: PinState, layers: list[int]) -> list[int]:
-    """The fewest layers that keep every pin of `state` clear, fewer than `layers` if any
-    (`exact.exact_stack`, from a clique's size up: no fewer can work)."""
+    """The fewest layers that keep every pin of `state` clear (its `rules`: the search for an
+    order leaves them as they were), fewer than `layers` if any (`exact.exact_stack`, from a
+    clique's size up: no fewer can work)."""
     for stack in range(_clique(conflict), max(layers, default=0)):
         found = exact_stack(conflict, state.rules, stack)
         if found is not None:

@@ -205,17 +205,17 @@ def _square(z: torch.Tensor) -> torch.Tensor:
 
 def _arc_table(paths: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Each closed path (B, T, 2) read by arc length: its arc length at each sample over two
-    revolutions (B, 2T + 1), and ARC_SAMPLES + 1 points equally spaced by it round one, as
-    complex numbers (B, ARC_SAMPLES + 1; the last is the first). Sub-arcs are then read from
-    the even points, not searched for in the samples one by one."""
+    revolutions (B, 2T + 1), and ARC_SAMPLES points equally spaced by it round one (B,
+    ARC_SAMPLES, 2). Sub-arcs are then read from the even points, not searched for in the
+    samples one by one."""
     B, T, _ = paths.shape
     step = (paths.roll(-1, 1) - paths).norm(dim=-1)  # (B, T): from sample k to k + 1
     cum = torch.cat([torch.zeros(B, 1, dtype=paths.dtype), step.repeat(1, 2).cumsum(1)], 1)
-    want = cum[:, T : T + 1] * torch.linspace(0, 1, ARC_SAMPLES + 1, dtype=paths.dtype)
+    want = cum[:, T : T + 1] * (torch.arange(ARC_SAMPLES, dtype=paths.dtype) / ARC_SAMPLES)
     k = torch.searchsorted(cum[:, : T + 1].contiguous(), want, right=True).clamp(1, T)
     lo, hi = cum.gather(1, k - 1), cum.gather(1, k)
     index = (k - 1) + (want - lo) / (hi - lo).clamp_min(1e-18)
-    return cum, _at(paths, index[:, None])[:, 0]
+    return cum, torch.view_as_real(_at(paths, index[:, None])[:, 0])
 
 
 def _along(cum: torch.Tensor, even: torch.Tensor, begin: torch.Tensor, length: torch.Tensor,
@@ -226,13 +226,7 @@ def _along(cum: torch.Tensor, even: torch.Tensor, begin: torch.Tensor, length: t
     first = _interp_index(cum, begin % T)  # arc length at each sub-arc's start
     last = _interp_index(cum, begin % T + length)
     want = first[..., None] + (last - first)[..., None] * fraction  # (B, A, m)
-    where = want * (ARC_SAMPLES / cum[:, T, None, None].clamp_min(1e-18))
-    low = where.floor()
-    frac = where - low
-    low = low.long() % ARC_SAMPLES
-    flat = low.reshape(len(even), -1)
-    p0, p1 = even.gather(1, flat), even.gather(1, flat + 1)
-    return (p0 + frac.reshape(flat.shape) * (p1 - p0)).reshape(want.shape)
+    return _at(even, want * (ARC_SAMPLES / cum[:, T, None, None].clamp_min(1e-18)))
 
 
 def _interp_index(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
