@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .braced import best_brackets, swept_candidates
+from .forkset import fork_sets
 from .layers import (
     Arm,
     Bracket,
@@ -38,64 +39,67 @@ from .layers import (
 from .options import Sizes
 from .parts import Assembly, Pin
 
-MAX_FORKS = 60  # layer searches per width before the construction gives up
+MAX_FORKS = 60  # single forks' layer searches per width before sets of forks are tried
+MAX_SETS = 4  # sets of forks tried per width, each as `forkset` screens them
 
 
 @dataclass
 class _Problem:
-    """A fork's layer search. `keep`: the union candidate each of its parts is (the forked
-    part's copies repeat one); `copies`: (joint, the part carried there or None, index) of
-    each copy; `real`: a real pin's pin in the search; `rods`: a real pin cut into rods, as
-    (the part carried, its pin in the search); `shaft`: the search's pin the copies are fixed
-    on."""
+    """A layer search with some parts forked. `keep`: the union candidate each of its parts is
+    (a forked part's copies repeat one); `copies`: (forked part, joint, the part carried there
+    or None, index) of each copy; `real`: a real pin's pin in the search; `rods`: a real pin
+    cut into rods, as (the part carried, its pin in the search); `shafts`: each forked part's
+    pin in the search its copies are fixed on."""
 
     keep: list[int] = field(default_factory=list)
     pins: list[Pin] = field(default_factory=list)
     blocked: list[list[int]] = field(default_factory=list)
     whole: list[int] = field(default_factory=list)
-    copies: list[tuple[int, int | None, int]] = field(default_factory=list)
+    copies: list[tuple[int, int, int | None, int]] = field(default_factory=list)
     real: dict[int, int] = field(default_factory=dict)
     rods: dict[int, list[tuple[int, int]]] = field(default_factory=dict)
-    shaft: int | None = None
+    shafts: dict[int, int] = field(default_factory=dict)
 
-    @property
-    def arms(self) -> list[int]:
-        """The copies' indices among the search's parts."""
-        return [c for _, _, c in self.copies]
+    def arms(self, part: int | None = None) -> list[int]:
+        """The copies' indices among the search's parts (of one forked part)."""
+        return [c for p, _, _, c in self.copies if part in (None, p)]
 
 
 def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with one part forked (and at most one ground pin on a bracket). ValueError when
-    none layers within MAX_FORKS layer searches."""
+    """Layers with one part forked (and at most one ground pin on a bracket), within MAX_FORKS
+    layer searches, else with one of the first MAX_SETS sets of forks `forkset` screens.
+    ValueError when none layers."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     bracket = best_brackets(conflicts, roles)
     moving = sorted(range(1, len(assembly.parts)), key=lambda q: len(assembly.parts[q].joints))
-    forks = [(q, s) for q in moving for s in assembly.parts[q].joints]
-    forks = [fork for fork in forks if _drivable(assembly, fork)]
+    forks = [((q, s),) for q in moving for s in assembly.parts[q].joints]
+    forks = [fork for fork in forks if _drivable(assembly, fork[0])]
     searches, refusal = 0, None
 
-    def search(fork: tuple[int, int], held: int | None, relaxed: bool = False):
+    def search(chosen: tuple, held: int | None, relaxed: bool = False):
         nonlocal searches, refusal
-        if searches >= MAX_FORKS:
-            raise refusal or ValueError("no forked part layers within the search")
         searches += 1
-        problem = _problem(assembly, union, conflicts, roles, fork, held, bracket, relaxed)
+        problem = _problem(assembly, union, conflicts, roles, chosen, held, bracket, relaxed)
         try:
             return problem, _layered(problem, union, conflicts, sizes, fewest=not relaxed)
         except NoFlatLayers as exc:
             refusal = refusal or exc
             if relaxed:
-                forks.remove(fork)
+                forks.remove(chosen)
             return None
 
-    for fork in list(forks):  # first the bound: no ground pins at all
+    for fork in forks[:MAX_FORKS]:  # first the bound: no ground pins at all
         search(fork, None, relaxed=True)
-    for held in [None, *ground]:
-        for fork in forks:
-            found = search(fork, held)
-            if found is not None:
-                return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
+    tries = [(fork, held) for held in [None, *ground] for fork in forks]
+    for fork, held in tries[: MAX_FORKS - searches]:
+        found = search(fork, held)
+        if found is not None:
+            return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
+    for chosen in fork_sets(assembly, union, roles, conflicts, _drivable, MAX_SETS):
+        found = search(chosen, None)
+        if found is not None:
+            return _real(assembly, found[1], found[0], roles, posts, chosen, len(paths))
     raise refusal or ValueError("no forked part layers")
 
 
@@ -112,31 +116,34 @@ def _problem(
     union: Assembly,
     conflicts: Conflicts,
     roles: list[tuple],
-    fork: tuple[int, int],
+    forks: tuple[tuple[int, int], ...],
     held: int | None,
     bracket: dict[int, int],
     relaxed: bool = False,
 ) -> _Problem:
-    """The search for part `fork[0]` forked at joint `fork[1]`, ground pin `held` (if any) on
-    its bracket; relaxed: no ground pins at all, a bound on every way to hold them."""
-    part, shaft = fork
+    """The search with each part `fork[0]` forked at joint `fork[1]` (forks sharing no joint),
+    ground pin `held` (if any) on its bracket; relaxed: no ground pins at all, a bound on every
+    way to hold them."""
     index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
     arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
-    forked = assembly.parts[part]
-    problem = _Problem(keep=[u for q, u in index.items() if q != part])
+    shaft_of = dict(forks)
+    problem = _Problem(keep=[u for q, u in index.items() if q not in shaft_of])
     if held is not None:
         problem.keep.append(bracket[held])
     geometry: dict[int, list[int]] = {}  # union candidate -> the copies made of it
-    for j in (j for j in forked.joints if j != shaft):
-        u = index[part] if forked.kind == "link" else arm[(part, tuple(sorted((shaft, j))))]
-        carries = [q for q, other in enumerate(assembly.parts) if j in other.joints and q != part]
-        for carried in carries or [None]:  # a joint of its own (an end effector): one arm
-            geometry.setdefault(u, []).append(len(problem.keep))
-            problem.copies.append((j, carried, len(problem.keep)))
-            problem.keep.append(u)
-    copies = problem.arms
+    for part, shaft in forks:
+        forked = assembly.parts[part]
+        for j in (j for j in forked.joints if j != shaft):
+            u = index[part] if forked.kind == "link" else arm[(part, tuple(sorted((shaft, j))))]
+            carries = [q for q, o in enumerate(assembly.parts) if j in o.joints and q != part]
+            for carried in carries or [None]:  # a joint of its own (an end effector): one arm
+                geometry.setdefault(u, []).append(len(problem.keep))
+                problem.copies.append((part, j, carried, len(problem.keep)))
+                problem.keep.append(u)
+    copies = problem.arms()
     where = {u: k for k, u in enumerate(problem.keep) if k not in copies}
     grounds = {pin.joint for pin in assembly.pins if 0 in pin.members}
+    cut = {j: p for p, s in forks for j in assembly.parts[p].joints if j != s}
 
     def mapped(k: int, exempt: tuple[int, ...] = ()) -> list[int]:
         near = conflicts.blocked[k]
@@ -155,13 +162,15 @@ def _problem(
         members = [where[u] for u in pin.members if u and u in where and roles[u][0] == "part"]
         if 0 in pin.members:
             members.insert(0, where[bracket[held]] if j == held else 0)
-        if j == shaft and kept:
-            problem.shaft = _add(problem, pin, members + copies, mapped(k))
-            problem.whole.append(problem.shaft)
-            problem.real[k] = problem.shaft
-        elif j in forked.joints and real:
-            here = tuple(c for joint, _, c in problem.copies if joint == j)
-            for joint, carried, c in problem.copies:
+        shafted = [p for p, s in forks if s == j]
+        if shafted and kept:
+            shaft = _add(problem, pin, members + problem.arms(shafted[0]), mapped(k))
+            problem.shafts[shafted[0]] = shaft
+            problem.whole.append(shaft)
+            problem.real[k] = shaft
+        elif j in cut and real:
+            here = tuple(c for _, joint, _, c in problem.copies if joint == j)
+            for _, joint, carried, c in problem.copies:
                 if joint == j and carried is not None:
                     own = members[0] if carried == 0 else where[index[carried]]
                     others = [m for m in members if m not in (own, 0)]
@@ -182,14 +191,15 @@ def _add(problem: _Problem, pin: Pin, members: list[int], near: list[int]) -> in
 def _layered(
     problem: _Problem, union: Assembly, conflicts: Conflicts, sizes: Sizes, fewest: bool = True
 ) -> Layout:
-    """stack_layers on the fork's candidates: a part's copies share its clearances and may
+    """stack_layers on the forks' candidates: a part's copies share its clearances and may
     not share a layer with each other (fewest: as there)."""
     sub = np.ix_(problem.keep, problem.keep)
     near, distance = conflicts.parts[sub].copy(), conflicts.distance[sub].copy()
-    copies = problem.arms
-    near[np.ix_(copies, copies)] = True
-    distance[np.ix_(copies, copies)] = 0.0
-    near[copies, copies] = False
+    for part in {p for p, _, _, _ in problem.copies}:
+        copies = problem.arms(part)
+        near[np.ix_(copies, copies)] = True
+        distance[np.ix_(copies, copies)] = 0.0
+        near[copies, copies] = False
     chosen = Assembly([union.parts[u] for u in problem.keep], [], problem.pins, [])
     return stack_layers(chosen, Conflicts(near, problem.blocked, distance), sizes, stubs=True,
                         whole=problem.whole, fewest=fewest)  # fmt: skip
@@ -201,20 +211,24 @@ def _real(
     problem: _Problem,
     roles: list[tuple],
     posts: np.ndarray,
-    fork: tuple[int, int],
+    forks: tuple[tuple[int, int], ...],
     first: int,
 ) -> Layout:
-    """The layout of the real parts: the forked part's arms (its layer their lowest), the rods
-    its pins are cut into, its shaft where no pin was, the bracket and where its post goes
+    """The layout of the real parts: each forked part's arms (its layer their lowest), the
+    rods its pins are cut into, its shaft where no pin was, the bracket and where its post goes
     (joint `first + k` for post k)."""
-    part, shaft = fork
     layers = np.zeros(len(assembly.parts), int)
     for k, u in enumerate(problem.keep):
         if roles[u][0] == "part" and roles[u][1]:
             layers[roles[u][1]] = layout.layers[k]
-    arms = tuple(Arm(tuple(sorted((shaft, j))), int(layout.layers[c]))
-                 for j, _, c in problem.copies)  # fmt: skip
-    layers[part] = min(a.layer for a in arms)
+    arms, shafts = {}, []
+    for part, shaft in forks:
+        arms[part] = tuple(Arm(tuple(sorted((shaft, j))), int(layout.layers[c]))
+                           for p, j, _, c in problem.copies if p == part)  # fmt: skip
+        layers[part] = min(a.layer for a in arms[part])
+        s = problem.shafts.get(part)
+        if s is not None and problem.pins[s].name.startswith("shaft_"):
+            shafts.append(Shaft(part, shaft, layout.pin_spans[s]))
     spans = [(0, 0)] * len(assembly.pins)
     stubs = {}
     for k, s in problem.real.items():
@@ -222,21 +236,20 @@ def _real(
             spans[k] = layout.pin_spans[s]
             if s in layout.cover_stubs:
                 stubs[k] = layout.cover_stubs[s]
-    forks = {}
+    forked = {j: p for p, s in forks for j in assembly.parts[p].joints if j != s}
+    cuts = {}
     for k, rods in problem.rods.items():
-        forks[k] = Fork(part, _merged([((carried,), layout.pin_spans[s]) for carried, s in rods]))
-        spans[k] = (forks[k].rods[0][1][0], max(hi for _, (_, hi) in forks[k].rods))
-    shafts = ()
-    if problem.shaft is not None and problem.pins[problem.shaft].name.startswith("shaft_"):
-        shafts = (Shaft(part, shaft, layout.pin_spans[problem.shaft]),)
+        merged = _merged([((carried,), layout.pin_spans[s]) for carried, s in rods])
+        cuts[k] = Fork(forked[assembly.pins[k].joint], merged)
+        spans[k] = (cuts[k].rods[0][1][0], max(hi for _, (_, hi) in cuts[k].rods))
     brackets = tuple(
         Bracket(roles[u][1], tuple(map(float, posts[roles[u][2]])), int(layout.layers[k]),
                 first + roles[u][2] in layout.top_joints)
         for k, u in enumerate(problem.keep) if roles[u][0] == "bracket")  # fmt: skip
     top = tuple(j for j in layout.top_joints if j < first)
     return Layout(layers, spans, top, layout.count, layout.min_gap, layout.minimal,
-                  arms={part: arms}, brackets=brackets, shafts=shafts, cover_stubs=stubs,
-                  forks=forks)  # fmt: skip
+                  arms=arms, brackets=brackets, shafts=tuple(shafts), cover_stubs=stubs,
+                  forks=cuts)  # fmt: skip
 
 
 def _merged(rods: list[tuple[tuple[int, ...], tuple[int, int]]]) -> tuple:

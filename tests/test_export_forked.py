@@ -93,6 +93,7 @@ def _forked_parts(out, parts: list[dict]) -> tuple[str, dict[int, list[dict]]]:
 
 def test_a_crank_walled_in_by_its_pins_is_forked_round_a_bracket(bicycle, monkeypatch, tmp_path):
     monkeypatch.setattr(forked, "MAX_FORKS", 0)
+    monkeypatch.setattr(forked, "MAX_SETS", 0)
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BICYCLE, tmp_path, {"mjcf"})
     out, result, report = bicycle
@@ -110,6 +111,7 @@ def test_a_crank_walled_in_by_its_pins_is_forked_round_a_bracket(bicycle, monkey
 
 def test_a_link_carrying_two_parts_at_one_joint_is_forked_without_a_bracket(monkeypatch, tmp_path):
     monkeypatch.setattr(forked, "MAX_FORKS", 0)
+    monkeypatch.setattr(forked, "MAX_SETS", 0)
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(CLEVIS, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()

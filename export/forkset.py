@@ -1,0 +1,197 @@
+"""Which parts to fork at once: one satisfiability problem over every fork there could be.
+
+Where no single fork lets the stack layer, several may: each cuts the pins at its part's
+carried joints, so other parts may pass between the rods there. The forks worth trying
+together are too many to search one set at a time, so one SAT problem holds them all: a
+literal per part and shaft joint (or whole), every plate each choice would make with its
+layer written in order (levels 1..LEVELS, ties allowed), and each pin's rule guarded by the
+choices that make it: a pin of whole parts, the shaft pin of a fork, or a fork's rods at a
+joint it carries. The plates' clearances are the candidates' of `braced.swept_candidates`,
+as `forked` searches them. Forks share no joint (two parts fixed on one shaft would turn as
+one), none but the crank's cuts the motor pivot, and each ground pin's parts may be held from
+the base or the cover (stubs), all of them from the same plate at a fork's shaft.
+
+What it answers is a screen, not a layout: parts on one layer may still clash, which the real
+search of `forked` then settles, so the sets come smallest first and several are tried.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from itertools import combinations, count
+
+import numpy as np
+from pysat.solvers import Solver
+
+from .exact import SOLVER
+from .layers import Conflicts
+from .parts import Assembly
+
+LEVELS = 24  # layers the screen allows: more than any mechanism built so far takes
+
+
+def fork_sets(
+    assembly: Assembly,
+    union: Assembly,
+    roles: list[tuple],
+    conflicts: Conflicts,
+    drivable,
+    tries: int,
+) -> Iterator[tuple[tuple[int, int], ...]]:
+    """Up to `tries` sets of forks (part, shaft joint) that pass the screen, each minimal (no
+    fork of it can be left whole), smallest first as found; none if no set passes."""
+    problem = _Screen(assembly, union, roles, conflicts, drivable)
+    forks = [(fork, lit) for fork, lit in problem.choice.items() if fork[1] is not None]
+    with Solver(name=SOLVER, bootstrap_with=problem.clauses) as solver:
+        for _ in range(tries):
+            if not solver.solve():
+                return
+            chosen = {lit for _, lit in forks if lit in set(solver.get_model())}
+            whole = []  # forks left whole that still pass: each taken off while one does
+            for _, lit in forks:
+                if lit in chosen and solver.solve(assumptions=[*whole, -lit]):
+                    whole.append(-lit)
+            solver.solve(assumptions=whole)
+            model = set(solver.get_model())
+            found = [(fork, lit) for fork, lit in forks if lit in model]
+            yield tuple(fork for fork, _ in found)
+            solver.add_clause([-lit for _, lit in found])
+
+
+class _Screen:
+    """The clauses. Plates: (part, shaft, joint, carried part, candidate, choice literal); a
+    whole part has shaft, joint and carried None."""
+
+    def __init__(self, assembly, union, roles, conflicts, drivable):
+        parts = assembly.parts
+        self.parts = parts
+        index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
+        arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
+        self.at: dict[int, list[int]] = {}
+        for p, part in enumerate(parts):
+            for j in part.joints:
+                self.at.setdefault(j, []).append(p)
+        self.pin = {pin.joint: set(near) for pin, near in zip(union.pins, conflicts.blocked)
+                    if not pin.name.startswith("post")}  # fmt: skip
+        literal = count(1)
+        self.choice = {}
+        for p in range(1, len(parts)):
+            self.choice[p, None] = next(literal)
+            for s in parts[p].joints:
+                if drivable(assembly, (p, s)):
+                    self.choice[p, s] = next(literal)
+        self.plates = []
+        for (p, s), lit in self.choice.items():
+            if s is None:
+                self.plates.append((p, None, None, None, index[p], lit))
+                continue
+            for c in (c for c in parts[p].joints if c != s):
+                u = index[p] if parts[p].kind == "link" else arm[p, tuple(sorted((s, c)))]
+                for carried in [q for q in self.at[c] if q != p] or [None]:
+                    self.plates.append((p, s, c, carried, u, lit))
+        n = len(self.plates)
+        first = next(literal)
+        self.level = np.arange(n * (LEVELS - 1)).reshape(n, LEVELS - 1) + first
+        self.fresh = count(first + self.level.size)
+        self.false, self.true = next(self.fresh), next(self.fresh)
+        self.clauses = [[-self.false], [self.true]]
+        self.clauses += [[-self._upto(p, lv), self._upto(p, lv + 1)]
+                         for p in range(n) for lv in range(1, LEVELS - 1)]  # fmt: skip
+        self._choices()
+        for joint in self.at:
+            self._joint(joint)
+
+    def _upto(self, plate: int, level: int) -> int:
+        """The literal: the plate's level is at most `level`."""
+        if level < 1:
+            return self.false
+        return self.true if level >= LEVELS else int(self.level[plate, level - 1])
+
+    def _below(self, p: int, q: int, *unless: int) -> None:
+        """Plate p on a lower level than q, unless one of the literals holds."""
+        self.clauses += [[*unless, -self._upto(q, lv), self._upto(p, lv - 1)]
+                         for lv in range(1, LEVELS + 1)]  # fmt: skip
+
+    def _apart(self, plate: int, members: list[tuple[int, int]], *unless: int) -> None:
+        """The plate below all the members (plate, literal that it is made) or above all."""
+        side = next(self.fresh)
+        for m, made in members:
+            self._below(plate, m, *unless, -made, -self.plates[plate][5], -side)
+            self._below(m, plate, *unless, -made, -self.plates[plate][5], side)
+
+    def _choices(self) -> None:
+        """One choice per part; forks share no joint."""
+        for p in range(1, len(self.parts)):
+            mine = [lit for (q, _), lit in self.choice.items() if q == p]
+            self.clauses += [mine, *([-a, -b] for a, b in combinations(mine, 2))]
+        forks = [(p, lit) for (p, s), lit in self.choice.items() if s is not None]
+        for (p, a), (q, b) in combinations(forks, 2):
+            if p != q and set(self.parts[p].joints) & set(self.parts[q].joints):
+                self.clauses.append([-a, -b])
+
+    def _near(self, plate: int, joint: int) -> bool:
+        """Whether the plate comes near the pin at `joint` (one of its own joints: never)."""
+        p, shaft, end, _, u, _ = self.plates[plate]
+        own = joint == shaft or (shaft is None and joint in self.parts[p].joints)
+        return not own and joint != end and u in self.pin.get(joint, ())
+
+    def _joint(self, joint: int) -> None:
+        """The rules of the pin at `joint`: whole, or cut into rods by a fork carrying it."""
+        there = self.at[joint]
+        moving = [p for p in there if p]
+        cuts = [(p, s) for p in moving for s in self.parts[p].joints
+                if s != joint and (p, s) in self.choice]  # fmt: skip
+        unless = [self.choice[cut] for cut in cuts]
+        members = [(k, plate[5], plate[0]) for k, plate in enumerate(self.plates)
+                   if plate[0] in moving and plate[1] in (None, joint)]  # fmt: skip
+        near = [k for k, plate in enumerate(self.plates)
+                if plate[0] not in there and self._near(k, joint)]  # fmt: skip
+        if len(there) == 1:  # a joint of one part: a pin only as a fork's shaft
+            members = [m for m in members if self.plates[m[0]][1] == joint]
+        if 0 in there:
+            side = {p: next(self.fresh) for p in moving}
+            for p in moving:
+                if (p, joint) in self.choice:  # its shaft: every part held from one plate
+                    fork = self.choice[p, joint]
+                    self.clauses += [c for q in moving if q != p
+                                     for c in ([-fork, -side[p], side[q]],
+                                               [-fork, side[p], -side[q]])]  # fmt: skip
+            for m, made, p in members:
+                for b in near:
+                    b_made = self.plates[b][5]
+                    self._below(m, b, *unless, -made, -b_made, -side[p])
+                    self._below(b, m, *unless, -made, -b_made, side[p])
+        elif len(members) >= 2 or len(there) == 1:
+            for b in near:
+                self._apart(b, [(m, made) for m, made, _ in members], *unless)
+        for p, s in cuts:
+            self._rods(joint, p, s, near)
+
+    def _rods(self, joint: int, part: int, shaft: int, near: list[int]) -> None:
+        """Fork (part, shaft) carries `joint`: a rod per part carried there, from its arm to
+        that part (or the ground), clear of whatever comes near and of the other parts there."""
+        fork = self.choice[part, shaft]
+        for k, (p, s, end, carried, _, _) in enumerate(self.plates):
+            if (p, s, end) != (part, shaft, joint) or carried is None:
+                continue
+            own = [(m, plate[5]) for m, plate in enumerate(self.plates)
+                   if carried and plate[0] == carried and plate[1] is None]  # fmt: skip
+            others = [m for m, plate in enumerate(self.plates)
+                      if plate[0] not in (0, part, carried) and plate[0] in self.at[joint]
+                      and plate[1] is None]  # fmt: skip
+            mine = [
+                m
+                for m, plate in enumerate(self.plates)
+                if plate[:2] == (part, shaft)
+                and plate[2] != joint
+                and plate[4] in self.pin.get(joint, ())
+            ]  # its other arms, passing by
+            blocked = near + others + mine
+            if carried == 0:  # held from the base or the cover
+                side = next(self.fresh)
+                for b in blocked:
+                    self._below(k, b, -fork, -self.plates[b][5], -side)
+                    self._below(b, k, -fork, -self.plates[b][5], side)
+                continue
+            for b in blocked:
+                self._apart(b, [(k, fork), *own], -fork)
