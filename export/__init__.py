@@ -9,9 +9,9 @@ pins, `routing`; where bent ones cannot either, a mechanism made of modules on o
 stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
-`forked`), plates become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges,
-pins, loop closures and crank servo become `mechanism.xml`
-with a `scene.xml` around it (`mjcf`).
+or several do, `forked`), plates become STL meshes (`meshes`, outlined by `plates`) and the
+bodies, hinges, pins, loop closures and crank servo become `mechanism.xml` with a `scene.xml`
+around it (`mjcf`).
 """
 
 from __future__ import annotations

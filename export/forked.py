@@ -11,11 +11,13 @@ turns. The rods at a joint are coaxial but need not meet in z (where they would,
 rod), so other parts may pass between them, and a bracket may hold the shaft between the arms.
 
 One part is forked, at one of its joints, with at most one ground pin on a bracket (the fewest
-brackets first, then the parts with the fewest joints). The clearances are those `braced`
-swept for its candidates at the same width: an arm is the part itself (a link) or the arm of a
-plate between the same joints, and its copies share its clearances. A fork is not searched
-when it does not layer even with no ground pins at all. No part but the crank is cut at the
-motor pivot: the crank must turn on a pin in the frame (or its own rod), where the motor is.
+brackets first, then the parts with the fewest joints); where none layers, several parts are
+forked at once, no two sharing a joint, in the sets `forkset` screens. The clearances are
+those `braced` swept for its candidates at the same width: an arm is the part itself (a link)
+or the arm of a plate between the same joints, and its copies share its clearances. A single
+fork is not searched when it does not layer even with no ground pins at all. No part but the
+crank is cut at the motor pivot: the crank must turn on a pin in the frame (or its own rod),
+where the motor is.
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ search of `forked` then settles, so the sets come smallest first and several are
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from itertools import combinations, count
 
 import numpy as np
@@ -35,25 +35,24 @@ def fork_sets(
     union: Assembly,
     roles: list[tuple],
     conflicts: Conflicts,
-    drivable,
+    drivable: Callable[[Assembly, tuple[int, int]], bool],
     tries: int,
 ) -> Iterator[tuple[tuple[int, int], ...]]:
     """Up to `tries` sets of forks (part, shaft joint) that pass the screen, each minimal (no
-    fork of it can be left whole), smallest first as found; none if no set passes."""
+    fork of it can be left whole), as the solver finds them; none if no set passes. A fork is
+    (part, shaft) as `drivable` allows it."""
     problem = _Screen(assembly, union, roles, conflicts, drivable)
     forks = [(fork, lit) for fork, lit in problem.choice.items() if fork[1] is not None]
     with Solver(name=SOLVER, bootstrap_with=problem.clauses) as solver:
         for _ in range(tries):
             if not solver.solve():
                 return
-            chosen = {lit for _, lit in forks if lit in set(solver.get_model())}
-            whole = []  # forks left whole that still pass: each taken off while one does
-            for _, lit in forks:
-                if lit in chosen and solver.solve(assumptions=[*whole, -lit]):
-                    whole.append(-lit)
-            solver.solve(assumptions=whole)
             model = set(solver.get_model())
-            found = [(fork, lit) for fork, lit in forks if lit in model]
+            off = [-lit for _, lit in forks if lit not in model]  # those it left whole
+            for _, lit in forks:  # then each it forked, left whole while the rest still pass
+                if lit in model and solver.solve(assumptions=[*off, -lit]):
+                    off.append(-lit)
+            found = [(fork, lit) for fork, lit in forks if -lit not in off]
             yield tuple(fork for fork, _ in found)
             solver.add_clause([-lit for _, lit in found])
 
@@ -91,26 +90,35 @@ class _Screen:
                     self.plates.append((p, s, c, carried, u, lit))
         n = len(self.plates)
         first = next(literal)
-        self.level = np.arange(n * (LEVELS - 1)).reshape(n, LEVELS - 1) + first
-        self.fresh = count(first + self.level.size)
-        self.false, self.true = next(self.fresh), next(self.fresh)
-        self.clauses = [[-self.false], [self.true]]
-        self.clauses += [[-self._upto(p, lv), self._upto(p, lv + 1)]
-                         for p in range(n) for lv in range(1, LEVELS - 1)]  # fmt: skip
+        self.fresh = count(first + n * (LEVELS - 1))
+        false, true = next(self.fresh), next(self.fresh)
+        self.upto = np.empty((n, LEVELS + 1), int)  # [p, l]: the literal "p's level <= l"
+        self.upto[:, 0], self.upto[:, LEVELS] = false, true
+        self.upto[:, 1:LEVELS] = np.arange(n * (LEVELS - 1)).reshape(n, LEVELS - 1) + first
+        ordered = np.stack([-self.upto[:, 1:-2], self.upto[:, 2:-1]], -1)  # <= l: <= l + 1
+        self.clauses = [[-false], [true], *ordered.reshape(-1, 2).tolist()]
+        self.below: list[tuple[int, int, tuple[int, ...]]] = []  # (p, q, unless) of `_below`
         self._choices()
         for joint in self.at:
             self._joint(joint)
-
-    def _upto(self, plate: int, level: int) -> int:
-        """The literal: the plate's level is at most `level`."""
-        if level < 1:
-            return self.false
-        return self.true if level >= LEVELS else int(self.level[plate, level - 1])
+        self._orders()
 
     def _below(self, p: int, q: int, *unless: int) -> None:
         """Plate p on a lower level than q, unless one of the literals holds."""
-        self.clauses += [[*unless, -self._upto(q, lv), self._upto(p, lv - 1)]
-                         for lv in range(1, LEVELS + 1)]  # fmt: skip
+        self.below.append((p, q, unless))
+
+    def _orders(self) -> None:
+        """The clauses of every `_below`, level by level: q at most l implies p at most l - 1."""
+        by_length: dict[int, list[tuple[int, int, tuple[int, ...]]]] = {}
+        for rule in self.below:
+            by_length.setdefault(len(rule[2]), []).append(rule)
+        for length, rules in by_length.items():
+            p, q = (np.array([rule[k] for rule in rules]) for k in (0, 1))
+            rows = np.empty((len(rules), LEVELS, length + 2), int)
+            rows[..., :length] = np.array([rule[2] for rule in rules]).reshape(-1, 1, length)
+            rows[..., length] = -self.upto[q, 1:]
+            rows[..., length + 1] = self.upto[p, :-1]
+            self.clauses += rows.reshape(-1, length + 2).tolist()
 
     def _apart(self, plate: int, members: list[tuple[int, int]], *unless: int) -> None:
         """The plate below all the members (plate, literal that it is made) or above all."""
@@ -179,14 +187,10 @@ class _Screen:
             others = [m for m, plate in enumerate(self.plates)
                       if plate[0] not in (0, part, carried) and plate[0] in self.at[joint]
                       and plate[1] is None]  # fmt: skip
-            mine = [
-                m
-                for m, plate in enumerate(self.plates)
-                if plate[:2] == (part, shaft)
-                and plate[2] != joint
-                and plate[4] in self.pin.get(joint, ())
-            ]  # its other arms, passing by
-            blocked = near + others + mine
+            mine = [m for m, plate in enumerate(self.plates)
+                    if plate[:2] == (part, shaft) and plate[2] != joint
+                    and plate[4] in self.pin.get(joint, ())]  # fmt: skip
+            blocked = near + others + mine  # mine: its other arms that pass by
             if carried == 0:  # held from the base or the cover
                 side = next(self.fresh)
                 for b in blocked:

@@ -237,6 +237,9 @@ def export(args: argparse.Namespace) -> int:
         forked = not framed and any(re.fullmatch(r"pin_\d+[a-z]", pin["name"]) for pin in pins)
         if report.passed and forked:
             outcome["  of which forked"] += 1
+            cut = {pin["fixed_in"] for pin in pins if re.fullmatch(r"pin_\d+[a-z]", pin["name"])}
+            if len(cut) >= 2:
+                outcome["    several parts at once"] += 1
         if report.passed and any(part["kind"] == "sheave" for part in result.parts):
             outcome["  of which strapped"] += 1
         split = not (forked or framed) and any("arm_of" in part for part in result.parts)
@@ -260,8 +263,9 @@ def export(args: argparse.Namespace) -> int:
                  "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
-                 "  of which on ground stubs", "  of which with a finer step",
-                 "failed verification", "refused (no flat layering)"):  # fmt: skip
+                 "    several parts at once", "  of which on ground stubs",
+                 "  of which with a finer step", "failed verification",
+                 "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
             print(f"  {name:28s} {outcome[name]}")
     if failed:

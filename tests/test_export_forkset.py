@@ -1,0 +1,107 @@
+"""Several parts forked at once (linkd.export.forkset screens the sets, linkd.export.forked
+builds them): a mechanism no single fork builds is built and verified in MuJoCo, the screen's
+sets are minimal and share no joint, and a planted collision of a cut rod is caught."""
+
+from itertools import combinations
+
+import numpy as np
+import pytest
+import trimesh
+from planted import collision_detail, editable_copy
+from pysat.solvers import Solver
+
+import linkd.export.forked as forked
+from linkd.export import export_mechanism
+from linkd.export.braced import swept_candidates
+from linkd.export.forkset import _Screen, fork_sets
+from linkd.export.layers import sweep
+from linkd.export.options import resolve_sizes
+from linkd.export.parts import assemble
+from linkd.mechanism import Mechanism
+from linkd.verified import export_verified
+
+# Generated (`generate(300, 7, GeneratorSettings(min_nodes=7, max_nodes=13))`, no. 237, scaled
+# to 100 mm and rounded to the micrometre). Every straight, bent, strapped, split and single
+# fork layering is refused; the crank plate forked at joint 3 together with link 4-5 forked at
+# joint 5 layers, each cutting the pins of its other joints into rods.
+TRIPOD = Mechanism(
+    [(-17.937, -32.98), (-12.401, -65.647), (64.907, -24.394), (-73.523, -45.027),
+     (-9.634, -35.511), (-42.03, -49.445), (40.591, 40.209), (-37.733, 63.699),
+     (91.306, -40.119), (-90.161, -51.978), (-4.313, 1.452), (51.604, -71.319),
+     (63.2, 57.322)],
+    [1, 0, 0, 0, 1, 0, 1, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 3), (1, 5), (1, 9), (1, 11), (2, 3), (3, 7), (3, 12), (4, 5),
+     (4, 9), (4, 11), (5, 8), (6, 7), (6, 10), (7, 8), (8, 10), (8, 12)],
+    (0, 1), 12,
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tripod(tmp_path_factory):
+    out = tmp_path_factory.mktemp("tripod")
+    result, report = export_verified(TRIPOD, out, {"mjcf", "stl"})
+    return out, result, report
+
+
+def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path):
+    monkeypatch.setattr(forked, "MAX_SETS", 0)
+    with pytest.raises(ValueError, match="flat layers"):
+        export_mechanism(TRIPOD, tmp_path, {"mjcf"})
+    out, result, report = tripod
+    assert report.passed, report.failed
+    parts = {p["name"]: p for p in result.parts}
+    arms: dict[str, list[dict]] = {}
+    for part in result.parts:
+        if "mesh" in part:
+            solid = trimesh.load(out / part["mesh"])
+            assert solid.is_watertight and solid.is_volume
+        if "arm_of" in part:
+            arms.setdefault(part["arm_of"], []).append(part)
+    assert set(arms) == {"plate_0_1_2_3", "link_4_5"}
+    joints = {name: {j for arm in cut for j in arm["joints"]} for name, cut in arms.items()}
+    assert not set.intersection(*joints.values())  # the forks share no joint
+    for name, cut in arms.items():
+        rods = [p for p in result.parts if p["kind"] == "pin" and p["name"][-1].isalpha()
+                and p.get("fixed_in") == name]  # fmt: skip
+        shaft = set.intersection(*(set(arm["joints"]) for arm in cut))
+        assert shaft - {rod["joints"][0] for rod in rods}  # every arm from an uncut shaft
+        assert len(rods) >= 2
+        for a, b in combinations(rods, 2):  # rods at one joint stop short of one another
+            if a["joints"] == b["joints"]:
+                assert a["layers"][1] < b["layers"][0] or b["layers"][1] < a["layers"][0]
+    assert parts["pin_0a"]["joins"] == ["plate_0_1_2_3", "ground"]  # the motor drives the crank
+
+
+def test_the_screened_sets_are_minimal_and_share_no_joint():
+    assembly = assemble(TRIPOD)
+    sizes = resolve_sizes(TRIPOD, assembly.parts, None)
+    union, roles, _, conflicts = swept_candidates(assembly, sweep(TRIPOD, sizes.link_width), sizes)
+    sets = list(fork_sets(assembly, union, roles, conflicts, forked._drivable, 3))
+    assert sets and len(set(sets)) == len(sets)  # each set found once
+    screen = _Screen(assembly, union, roles, conflicts, forked._drivable)
+    forks = {fork: lit for fork, lit in screen.choice.items() if fork[1] is not None}
+    with Solver(bootstrap_with=screen.clauses) as solver:
+        for chosen in sets:
+            assert len(chosen) >= 2
+            assert all(forked._drivable(assembly, fork) for fork in chosen)
+            for (p, _), (q, _) in combinations(chosen, 2):
+                assert not set(assembly.parts[p].joints) & set(assembly.parts[q].joints)
+            off = [-lit for fork, lit in forks.items() if fork not in chosen]
+            assert solver.solve(assumptions=off + [forks[f] for f in chosen])
+            for fork in chosen:  # none of them can be left whole
+                assert not solver.solve(assumptions=[*off, -forks[fork]])
+
+
+def test_a_rod_run_through_the_stack_is_caught(tripod, tmp_path):
+    """A rod at a joint the link 4-5 carries, stretched from the base to the cover: parts
+    pass the joint between the rods there, so verification must name it."""
+    tree, geoms = editable_copy(tripod[0], tmp_path)
+    rods = sorted(n for n in geoms if n and n.startswith("pin_4") and n[-1].isalpha())
+    rod = geoms[rods[0]]
+    radius, _ = map(float, rod.get("size").split())
+    x, y, _ = map(float, rod.get("pos").split())
+    heights = [float(g.get("pos").split()[2]) for g in geoms.values() if g.get("pos")]
+    low, high = float(np.min(heights)), float(np.max(heights))
+    rod.set("size", f"{radius} {(high - low) / 2}")
+    rod.set("pos", f"{x} {y} {(high + low) / 2}")
+    assert rods[0] in collision_detail(tree, tmp_path)
