@@ -145,7 +145,7 @@ def _problem(
     copies = problem.arms()
     where = {u: k for k, u in enumerate(problem.keep) if k not in copies}
     grounds = {pin.joint for pin in assembly.pins if 0 in pin.members}
-    cut = {j: p for p, s in forks for j in assembly.parts[p].joints if j != s}
+    cut = {j for p, s in forks for j in assembly.parts[p].joints if j != s}  # rods there
 
     def mapped(k: int, exempt: tuple[int, ...] = ()) -> list[int]:
         near = conflicts.blocked[k]
