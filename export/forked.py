@@ -12,7 +12,8 @@ rod), so other parts may pass between them, and a bracket may hold the shaft bet
 
 One part is forked, at one of its joints, with at most one ground pin on a bracket (the fewest
 brackets first, then the parts with the fewest joints); where none layers, several parts are
-forked at once, no two sharing a joint, in the sets `forkset` screens. The clearances are
+forked at once, no two sharing a joint, with at most one ground pin on a bracket, in the sets
+`forkset` screens. The clearances are
 those `braced` swept for its candidates at the same width: an arm is the part itself (a link)
 or the arm of a plate between the same joints, and its copies share its clearances. A single
 fork is not searched when it does not layer even with no ground pins at all. No part but the
@@ -98,8 +99,8 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         found = search(fork, held)
         if found is not None:
             return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
-    for chosen in fork_sets(assembly, union, roles, conflicts, _drivable, MAX_SETS):
-        found = search(chosen, None)
+    for chosen, held in fork_sets(assembly, union, roles, conflicts, _drivable, bracket, MAX_SETS):
+        found = search(chosen, held)
         if found is not None:
             return _real(assembly, found[1], found[0], roles, posts, chosen, len(paths))
     raise refusal or ValueError("no forked part layers")

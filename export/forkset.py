@@ -9,7 +9,9 @@ choices that make it: a pin of whole parts, the shaft pin of a fork, or a fork's
 joint it carries. The plates' clearances are the candidates' of `braced.swept_candidates`,
 as `forked` searches them. Forks share no joint (two parts fixed on one shaft would turn as
 one), none but the crank's cuts the motor pivot, and each ground pin's parts may be held from
-the base or the cover (stubs), all of them from the same plate at a fork's shaft.
+the base or the cover (stubs), all of them from the same plate at a fork's shaft, or, at one
+ground pin at most, from its bracket (`braced.best_brackets`: a ground plate inside the stack,
+on a post from the base or the cover), as `forked` can hold one.
 
 What it answers is a screen, not a layout: parts on one layer may still clash, which the real
 search of `forked` then settles, so the sets come smallest first and several are tried.
@@ -28,6 +30,7 @@ from .layers import Conflicts
 from .parts import Assembly
 
 LEVELS = 24  # layers the screen allows: more than any mechanism built so far takes
+BRACKET = -1  # a bracket's part among the plates
 
 
 def fork_sets(
@@ -36,32 +39,36 @@ def fork_sets(
     roles: list[tuple],
     conflicts: Conflicts,
     drivable: Callable[[Assembly, tuple[int, int]], bool],
+    bracket: dict[int, int],
     tries: int,
-) -> Iterator[tuple[tuple[int, int], ...]]:
-    """Up to `tries` sets of forks (part, shaft joint) that pass the screen, each minimal (no
-    fork of it can be left whole), as the solver finds them; none if no set passes. A fork is
-    (part, shaft) as `drivable` allows it."""
-    problem = _Screen(assembly, union, roles, conflicts, drivable)
+) -> Iterator[tuple[tuple[tuple[int, int], ...], int | None]]:
+    """Up to `tries` sets of forks (part, shaft joint), each with the ground joint held on its
+    `bracket` candidate (or None), that pass the screen, each minimal (no fork of it can be
+    left whole, nor the bracket left out), as the solver finds them; none if none passes. A
+    fork is (part, shaft) as `drivable` allows it."""
+    problem = _Screen(assembly, union, roles, conflicts, drivable, bracket)
     forks = [(fork, lit) for fork, lit in problem.choice.items() if fork[1] is not None]
+    forks += [((0, joint), lit) for joint, lit in problem.held.items()]  # a bracket: (0, joint)
     with Solver(name=SOLVER, bootstrap_with=problem.clauses) as solver:
         for _ in range(tries):
             if not solver.solve():
                 return
             model = set(solver.get_model())
-            off = [-lit for _, lit in forks if lit not in model]  # those it left whole
-            for _, lit in forks:  # then each it forked, left whole while the rest still pass
+            off = [-lit for _, lit in forks if lit not in model]  # those it left out
+            for _, lit in forks:  # then each it took, left out while the rest still pass
                 if lit in model and solver.solve(assumptions=[*off, -lit]):
                     off.append(-lit)
             found = [(fork, lit) for fork, lit in forks if -lit not in off]
-            yield tuple(fork for fork, _ in found)
+            held = next((joint for (part, joint), _ in found if part == 0), None)
+            yield tuple(fork for fork, _ in found if fork[0]), held
             solver.add_clause([-lit for _, lit in found])
 
 
 class _Screen:
     """The clauses. Plates: (part, shaft, joint, carried part, candidate, choice literal); a
-    whole part has shaft, joint and carried None."""
+    whole part has shaft, joint and carried None, a bracket part BRACKET and its joint."""
 
-    def __init__(self, assembly, union, roles, conflicts, drivable):
+    def __init__(self, assembly, union, roles, conflicts, drivable, bracket):
         parts = assembly.parts
         self.parts = parts
         index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
@@ -70,8 +77,12 @@ class _Screen:
         for p, part in enumerate(parts):
             for j in part.joints:
                 self.at.setdefault(j, []).append(p)
-        self.pin = {pin.joint: set(near) for pin, near in zip(union.pins, conflicts.blocked)
-                    if not pin.name.startswith("post")}  # fmt: skip
+        self.pin, self.post = {}, {}  # the candidates near each joint's pin, each post
+        for pin, near in zip(union.pins, conflicts.blocked):
+            if pin.name.startswith("post"):
+                self.post[pin.members[1]] = set(near)
+            else:
+                self.pin[pin.joint] = set(near)
         literal = count(1)
         self.choice = {}
         for p in range(1, len(parts)):
@@ -88,6 +99,10 @@ class _Screen:
                 u = index[p] if parts[p].kind == "link" else arm[p, tuple(sorted((s, c)))]
                 for carried in [q for q in self.at[c] if q != p] or [None]:
                     self.plates.append((p, s, c, carried, u, lit))
+        self.held = {}  # ground joint -> the literal: its bracket holds it
+        for joint, u in bracket.items():
+            self.held[joint] = next(literal)
+            self.plates.append((BRACKET, None, joint, None, u, self.held[joint]))
         n = len(self.plates)
         first = next(literal)
         self.fresh = count(first + n * (LEVELS - 1))
@@ -136,11 +151,15 @@ class _Screen:
         for (p, a), (q, b) in combinations(forks, 2):
             if p != q and set(self.parts[p].joints) & set(self.parts[q].joints):
                 self.clauses.append([-a, -b])
+        self.clauses += [[-a, -b] for a, b in combinations(self.held.values(), 2)]
+        for (p, s), lit in self.choice.items():  # a fork's rod there or the bracket, not both
+            self.clauses += [[-lit, -self.held[j]] for j in self.parts[p].joints
+                             if s is not None and j != s and j in self.held]  # fmt: skip
 
     def _near(self, plate: int, joint: int) -> bool:
         """Whether the plate comes near the pin at `joint` (one of its own joints: never)."""
         p, shaft, end, _, u, _ = self.plates[plate]
-        own = joint == shaft or (shaft is None and joint in self.parts[p].joints)
+        own = joint == shaft or (shaft is None and p != BRACKET and joint in self.parts[p].joints)
         return not own and joint != end and u in self.pin.get(joint, ())
 
     def _joint(self, joint: int) -> None:
@@ -164,16 +183,34 @@ class _Screen:
                     self.clauses += [c for q in moving if q != p
                                      for c in ([-fork, -side[p], side[q]],
                                                [-fork, side[p], -side[q]])]  # fmt: skip
+            held = [self.held[joint]] if joint in self.held else []  # else on its bracket:
             for m, made, p in members:
                 for b in near:
                     b_made = self.plates[b][5]
-                    self._below(m, b, *unless, -made, -b_made, -side[p])
-                    self._below(b, m, *unless, -made, -b_made, side[p])
+                    self._below(m, b, *unless, *held, -made, -b_made, -side[p])
+                    self._below(b, m, *unless, *held, -made, -b_made, side[p])
+            if held:
+                self._bracket(joint, [(m, made) for m, made, _ in members], near)
         elif len(members) >= 2 or len(there) == 1:
             for b in near:
                 self._apart(b, [(m, made) for m, made, _ in members], *unless)
         for p, s in cuts:
             self._rods(joint, p, s, near)
+
+    def _bracket(self, joint: int, members: list[tuple[int, int]], near: list[int]) -> None:
+        """The ground pin at `joint` held on its bracket: a pin between the bracket and the
+        parts there, and the bracket's post from the base or the cover, clear of the plates that
+        come near it."""
+        held = self.held[joint]
+        bracket = next(k for k, (part, _, end, _, _, _) in enumerate(self.plates)
+                       if part == BRACKET and end == joint)  # fmt: skip
+        for b in near:
+            self._apart(b, [(bracket, held), *members], -held)
+        side = next(self.fresh)  # true: the post stands in the base
+        for b, plate in enumerate(self.plates):
+            if plate[4] in self.post[self.plates[bracket][4]]:
+                self._below(bracket, b, -held, -plate[5], -side)
+                self._below(b, bracket, -held, -plate[5], side)
 
     def _rods(self, joint: int, part: int, shaft: int, near: list[int]) -> None:
         """Fork (part, shaft) carries `joint`: a rod per part carried there, from its arm to

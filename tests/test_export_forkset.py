@@ -1,6 +1,7 @@
 """Several parts forked at once (linkd.export.forkset screens the sets, linkd.export.forked
-builds them): a mechanism no single fork builds is built and verified in MuJoCo, the screen's
-sets are minimal and share no joint, and a planted collision of a cut rod is caught."""
+builds them): mechanisms no single fork builds are built and verified in MuJoCo, with and
+without a bracket, the screen's sets are minimal and share no joint, and a planted collision
+of a cut rod is caught."""
 
 from itertools import combinations
 
@@ -12,7 +13,7 @@ from pysat.solvers import Solver
 
 import linkd.export.forked as forked
 from linkd.export import export_mechanism
-from linkd.export.braced import swept_candidates
+from linkd.export.braced import best_brackets, swept_candidates
 from linkd.export.forkset import _Screen, fork_sets
 from linkd.export.layers import sweep
 from linkd.export.options import resolve_sizes
@@ -33,6 +34,21 @@ TRIPOD = Mechanism(
     [(0, 1), (0, 2), (1, 2), (1, 3), (1, 5), (1, 9), (1, 11), (2, 3), (3, 7), (3, 12), (4, 5),
      (4, 9), (4, 11), (5, 8), (6, 7), (6, 10), (7, 8), (8, 10), (8, 12)],
     (0, 1), 12,
+)  # fmt: skip
+
+
+# Generated (`generate(300, 2026, GeneratorSettings(min_nodes=7, max_nodes=13))`, no. 16,
+# scaled and rounded the same way). The crank plate must be held from inside the stack, and
+# no single fork layers: the crank forked at its pivot round a bracket, with plate 5-7-9
+# forked at joint 5, does.
+BRACED = Mechanism(
+    [(1.159, -12.052), (22.473, -30.813), (-11.431, 91.667), (84.374, -72.085),
+     (98.154, 34.753), (-50.299, -63.501), (14.433, -0.164), (48.019, -19.33),
+     (-74.687, 68.884), (69.027, 50.51)],
+    [1, 0, 0, 1, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (0, 6), (1, 2), (1, 4), (1, 5), (1, 6), (2, 7), (3, 4), (3, 5), (4, 8),
+     (5, 7), (5, 9), (7, 8), (7, 9)],
+    (0, 1), 9,
 )  # fmt: skip
 
 
@@ -72,24 +88,43 @@ def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path)
     assert parts["pin_0a"]["joins"] == ["plate_0_1_2_3", "ground"]  # the motor drives the crank
 
 
+def test_forks_round_a_bracket_build_what_no_single_fork_does(monkeypatch, tmp_path):
+    monkeypatch.setattr(forked, "MAX_SETS", 0)
+    with pytest.raises(ValueError, match="flat layers"):
+        export_mechanism(BRACED, tmp_path / "refused", {"mjcf"})
+    monkeypatch.undo()
+    result, report = export_verified(BRACED, tmp_path, {"mjcf", "stl"})
+    assert report.passed, report.failed
+    parts = {p["name"]: p for p in result.parts}
+    assert {p["arm_of"] for p in result.parts if "arm_of" in p} == {"plate_0_1_2_6", "plate_5_7_9"}
+    bracket, shaft = parts["ground_bracket0"], parts["pin_0"]
+    assert shaft["joins"] == ["ground_bracket0", "plate_0_1_2_6"]
+    assert shaft["fixed_in"] == "plate_0_1_2_6"  # the crank's shaft turns in the bracket
+    assert shaft["layers"][0] < bracket["layer"] < shaft["layers"][1]  # between its arms
+    post = next(p for p in result.parts if p["kind"] == "post")
+    assert bracket["layer"] in post["layers"]
+
+
 def test_the_screened_sets_are_minimal_and_share_no_joint():
     assembly = assemble(TRIPOD)
     sizes = resolve_sizes(TRIPOD, assembly.parts, None)
     union, roles, _, conflicts = swept_candidates(assembly, sweep(TRIPOD, sizes.link_width), sizes)
-    sets = list(fork_sets(assembly, union, roles, conflicts, forked._drivable, 3))
+    bracket = best_brackets(conflicts, roles)
+    sets = list(fork_sets(assembly, union, roles, conflicts, forked._drivable, bracket, 3))
     assert sets and len(set(sets)) == len(sets)  # each set found once
-    screen = _Screen(assembly, union, roles, conflicts, forked._drivable)
-    forks = {fork: lit for fork, lit in screen.choice.items() if fork[1] is not None}
+    screen = _Screen(assembly, union, roles, conflicts, forked._drivable, bracket)
+    taken = {fork: lit for fork, lit in screen.choice.items() if fork[1] is not None}
+    taken |= {(0, joint): lit for joint, lit in screen.held.items()}  # the brackets
     with Solver(bootstrap_with=screen.clauses) as solver:
-        for chosen in sets:
-            assert len(chosen) >= 2
-            assert all(forked._drivable(assembly, fork) for fork in chosen)
-            for (p, _), (q, _) in combinations(chosen, 2):
+        for forks, held in sets:
+            chosen = [*forks, *([(0, held)] if held is not None else [])]
+            assert forks and all(forked._drivable(assembly, fork) for fork in forks)
+            for (p, _), (q, _) in combinations(forks, 2):
                 assert not set(assembly.parts[p].joints) & set(assembly.parts[q].joints)
-            off = [-lit for fork, lit in forks.items() if fork not in chosen]
-            assert solver.solve(assumptions=off + [forks[f] for f in chosen])
-            for fork in chosen:  # none of them can be left whole
-                assert not solver.solve(assumptions=[*off, -forks[fork]])
+            off = [-lit for key, lit in taken.items() if key not in chosen]
+            assert solver.solve(assumptions=off + [taken[key] for key in chosen])
+            for key in chosen:  # none of them can be left out
+                assert not solver.solve(assumptions=[*off, -taken[key]])
 
 
 def test_a_rod_run_through_the_stack_is_caught(tripod, tmp_path):
