@@ -13,12 +13,11 @@ rod), so other parts may pass between them, and a bracket may hold the shaft bet
 One part is forked, at one of its joints, with at most one ground pin on a bracket (the fewest
 brackets first, then the parts with the fewest joints); where none layers, several parts are
 forked at once, no two sharing a joint, with at most one ground pin on a bracket, in the sets
-`forkset` screens. The clearances are
-those `braced` swept for its candidates at the same width: an arm is the part itself (a link)
-or the arm of a plate between the same joints, and its copies share its clearances. A single
-fork is not searched when it does not layer even with no ground pins at all. No part but the
-crank is cut at the motor pivot: the crank must turn on a pin in the frame (or its own rod),
-where the motor is.
+`forkset` screens. The clearances are those `braced` swept for its candidates at the same
+width: an arm is the part itself (a link) or the arm of a plate between the same joints, and
+its copies share its clearances. A single fork is not searched when it does not layer even
+with no ground pins at all. No part but the crank is cut at the motor pivot: the crank must
+turn on a pin in the frame (or its own rod), where the motor is.
 """
 
 from __future__ import annotations
@@ -129,8 +128,8 @@ def _problem(
     way to hold them."""
     index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
     arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
-    shaft_of = dict(forks)
-    problem = _Problem(keep=[u for q, u in index.items() if q not in shaft_of])
+    forked_parts = {p for p, _ in forks}
+    problem = _Problem(keep=[u for q, u in index.items() if q not in forked_parts])
     if held is not None:
         problem.keep.append(bracket[held])
     geometry: dict[int, list[int]] = {}  # union candidate -> the copies made of it
