@@ -14,7 +14,7 @@ ground pin at most, from its bracket (`braced.best_brackets`: a ground plate ins
 on a post from the base or the cover), as `forked` can hold one.
 
 What it answers is a screen, not a layout: parts on one layer may still clash, which the real
-search of `forked` then settles, so the sets come smallest first and several are tried.
+search of `forked` then settles, so each set it passes is made minimal and several are tried.
 """
 
 from __future__ import annotations
