@@ -183,7 +183,7 @@ class _Screen:
                     self.clauses += [c for q in moving if q != p
                                      for c in ([-fork, -side[p], side[q]],
                                                [-fork, side[p], -side[q]])]  # fmt: skip
-            held = [self.held[joint]] if joint in self.held else []  # else on its bracket:
+            held = [self.held[joint]] if joint in self.held else []  # stubs unless bracketed
             for m, made, p in members:
                 for b in near:
                     b_made = self.plates[b][5]
