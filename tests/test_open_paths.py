@@ -93,6 +93,31 @@ def test_sub_arcs_are_read_at_equal_arc_length():
         assert np.allclose(points[k, [0, -1]], np.exp(1j * np.array(ends)), atol=5e-4)
 
 
+def test_a_short_sub_arc_far_from_the_origin_fits_exactly():
+    """A tenth of the revolution of a path 50 units from the origin, where the crank's samples
+    crowd (a short arc, far from the path's middle), turned, scaled and moved as the target
+    (walked forwards, and mirrored: backwards and reflected), fits with no error and the
+    similarity it was made with: the fit's sums keep their digits."""
+    import torch
+
+    from linkd.design.stroke import _at, _fit
+
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    angle = t + 0.9 * np.sin(t)  # turns slowly round t = pi
+    path = np.stack([40 + 8 * np.cos(angle) + np.cos(2 * t), -30 + 5 * np.sin(angle)], -1)
+    paths = torch.tensor(path[None], dtype=torch.float32)
+    begin, length = torch.tensor([[115.0]]), torch.tensor([[25.6]])
+    fraction = torch.linspace(0, 1, 32)
+    arc = _at(paths.double(), (begin + length * fraction)[..., None, :].double())[0, 0].numpy()
+    gain = 2.5 * np.exp(0.7j)
+    joints = torch.tensor([[[arc[0].real, arc[0].imag]]], dtype=torch.float32)  # near the arc
+    for mirrored, walked in ((0, arc), (1, np.conj(arc[::-1]))):
+        z = torch.tensor(gain * walked + (3 - 1j), dtype=torch.complex64)
+        score, fitted, _ = _fit(paths, joints, z, begin, length, fraction, None)
+        assert score[0, mirrored, 0] < 1e-3 < score[0, 1 - mirrored, 0]
+        assert abs(complex(fitted[0, mirrored, 0]) - gain) < 1e-3 * abs(gain)
+
+
 def test_crank_range_in_mechanism_json(tmp_path):
     mech = classic.crank_rocker().replace(crank_range=(1.0, 3.5))
     mech.save(tmp_path / "m.json")

@@ -173,29 +173,40 @@ def _fit(paths, joints, z, begin, length, fraction, table: tuple | None) -> tupl
     """Score (B, 2, A), gain (scale and rotation as one complex number) and sub-arc centre of
     every sub-arc [begin, begin + length] (B, A) fitted onto the target z (m,) in order,
     walked forwards and (mirrored) backwards: at equal crank steps when timed (`table` None),
-    else at equal arc length (`table`: `_arc_table` of the paths)."""
+    else at equal arc length (`table`: `_arc_table` of the paths). Each fit needs only the
+    sub-arc's sums (of its points, their squares and their products with the target, forwards
+    and backwards), so no centred or mirrored copy of the points is made. The sums are taken
+    in double precision about each path's mean: a short sub-arc far from it would lose its
+    spread's digits in single precision."""
+    origin = paths.mean(1, keepdim=True)  # (B, 1, 2)
     if table is None:
-        points = _at(paths, begin[..., None] + length[..., None] * fraction)  # (B, A, m)
+        points = _at(paths - origin, begin[..., None] + length[..., None] * fraction)  # (B, A, m)
     else:
-        points = _along(*table, begin, length, fraction)
-    m = len(z)
-    z = z - z.mean()
+        points = _along(table[0], table[1] - origin, begin, length, fraction)
+    m, dtype = len(z), z.dtype
+    points, z = points.to(torch.complex128), (z - z.mean()).to(torch.complex128)
+    mean = points.mean(-1)  # (B, A)
+    power = (_square(points).sum(-1) - m * _square(mean)).clamp_min(1e-18)
+    # sum of conj(p - mean) z forwards, and of (p - mean) z with the target reversed (mirrored)
+    forwards = (points @ z.conj()).conj() - mean.conj() * z.sum()
+    backwards = points @ z.flip(0) - mean * z.sum()
+    origin = torch.complex(origin[:, 0, 0], origin[:, 0, 1])[:, None]
     scores, gains, centres = [], [], []
-    for mirrored in (False, True):
-        w = points.conj().flip(-1) if mirrored else points
-        centre = w.mean(-1, keepdim=True)
-        w = w - centre
-        power = _square(w).sum(-1).clamp_min(1e-18)
-        cross = (w.conj() * z).sum(-1)
+    for mirrored, cross in ((False, forwards), (True, backwards)):
+        centre = (mean + origin).conj() if mirrored else mean + origin
         fit = (_square(z).sum() - _square(cross) / power).clamp_min(0) / m
         gain = cross / power
         # How far the placed joints reach: |gain| times the joints' distance from the centre.
         zj = torch.complex(joints[..., 0], (-1 if mirrored else 1) * joints[..., 1])
-        reach = (_square(zj[:, None, :] - centre).amax(-1) * _square(gain)).sqrt()
+        reach = (_square(zj[:, None, :] - centre[..., None]).amax(-1) * _square(gain)).sqrt()
         scores.append(fit.sqrt() + torch.relu(reach - MAX_REACH))
         gains.append(gain)
-        centres.append(centre[..., 0])
-    return torch.stack(scores, 1), torch.stack(gains, 1), torch.stack(centres, 1)
+        centres.append(centre)
+    return (
+        torch.stack(scores, 1).to(paths.dtype),
+        torch.stack(gains, 1).to(dtype),
+        torch.stack(centres, 1).to(dtype),
+    )
 
 
 def _square(z: torch.Tensor) -> torch.Tensor:
@@ -239,14 +250,12 @@ def _interp_index(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
 def _at(paths: torch.Tensor, where: torch.Tensor) -> torch.Tensor:
     """Points of closed paths (B, T, 2) at fractional indices (B, A, m), as complex numbers."""
     B, T, _ = paths.shape
+    z = torch.view_as_complex(paths.contiguous())  # (B, T)
+    step = z.roll(-1, 1) - z  # from each sample to the next, round the revolution
     low = where.floor()
-    frac = where - low
-    low = low.long() % T
-    flat = low.reshape(B, -1)
-    p0 = paths.gather(1, flat[..., None].expand(-1, -1, 2))
-    p1 = paths.gather(1, ((flat + 1) % T)[..., None].expand(-1, -1, 2))
-    p = p0 + frac.reshape(B, -1)[..., None] * (p1 - p0)
-    return torch.complex(p[..., 0], p[..., 1]).reshape(where.shape)
+    frac = (where - low).reshape(B, -1)
+    index = low.long().reshape(B, -1) % T
+    return (z.gather(1, index) + frac * step.gather(1, index)).reshape(where.shape)
 
 
 def strokes(batch: LinkageBatch, crank: np.ndarray, goal: Goal, count: int) -> tuple:
