@@ -190,10 +190,10 @@ def _fit(paths, joints, z, begin, length, fraction, table: tuple | None) -> tupl
     # sum of conj(p - mean) z forwards, and of (p - mean) z with the target reversed (mirrored)
     forwards = (points @ z.conj()).conj() - mean.conj() * z.sum()
     backwards = points @ z.flip(0) - mean * z.sum()
-    origin = torch.complex(origin[:, 0, 0], origin[:, 0, 1])[:, None]
+    middle = mean + torch.complex(origin[:, 0, 0], origin[:, 0, 1])[:, None]  # in the paths' frame
     scores, gains, centres = [], [], []
     for mirrored, cross in ((False, forwards), (True, backwards)):
-        centre = (mean + origin).conj() if mirrored else mean + origin
+        centre = middle.conj() if mirrored else middle
         fit = (_square(z).sum() - _square(cross) / power).clamp_min(0) / m
         gain = cross / power
         # How far the placed joints reach: |gain| times the joints' distance from the centre.
