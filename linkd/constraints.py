@@ -245,11 +245,12 @@ def _measure(batch: LinkageBatch, c: Constraints, motion) -> dict:
         pivot = pos[:, 0]
         out["motor_at"] = (pivot, -np.linalg.norm(pivot - np.array(c.motor_at), axis=1))
     if c.ground_box is not None:
-        bounds = _bounds(pos, fixed)
+        bounds = _bounds(pos, pos, fixed)
         out["ground_box"] = (bounds, c.ground_box.bounds_margin(bounds))
     if c.envelope is not None:
-        paths = np.stack([motion.x, motion.y], -1)  # (B, N, T, 2)
-        bounds = _bounds(paths.reshape(len(batch), -1, 2), np.repeat(valid, paths.shape[2], 1))
+        low = np.stack([motion.x.min(2), motion.y.min(2)], -1)  # (B, N, 2) over the turn
+        high = np.stack([motion.x.max(2), motion.y.max(2)], -1)
+        bounds = _bounds(low, high, valid)
         out["envelope"] = (bounds, c.envelope.bounds_margin(bounds))
     if c.min_link is not None:
         d = np.linalg.norm(pos[:, :, None] - pos[:, None], axis=-1)
@@ -265,10 +266,12 @@ def _measure(batch: LinkageBatch, c: Constraints, motion) -> dict:
     return out
 
 
-def _bounds(points: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """(B, 4) x0, y0, x1, y1 of points (B, P, 2) where mask (B, P)."""
-    low = np.where(mask[..., None], points, np.inf).min(1)
-    high = np.where(mask[..., None], points, -np.inf).max(1)
+def _bounds(low: np.ndarray, high: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """(B, 4) x0, y0, x1, y1 of the joints where mask (B, N), each joint reaching from `low`
+    to `high` (B, N, 2): the joints' own extremes over the turn are taken first, along its
+    contiguous axis, which is what makes the envelope cheap to screen."""
+    low = np.where(mask[..., None], low, np.inf).min(1)
+    high = np.where(mask[..., None], high, -np.inf).max(1)
     return np.concatenate([low, high], 1)
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from functools import partial, reduce
 
 import numpy as np
 import torch
@@ -29,6 +30,7 @@ from linkd.curves import chamfer_batch
 from linkd.geometry import Similarity
 from linkd.validator import validate
 
+from .parallel import run_parts, split
 from .propose import Candidates, merged
 from .refine import RefineSettings, resample_closed
 from .stroke import Goal, stroke_scores, strokes
@@ -71,11 +73,19 @@ def pinned(candidates: Candidates, c: Constraints, pin_at: Callable) -> Candidat
 
 def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
     """Re-place placed candidates so that each crank pivot lies exactly on its motor point
-    (`motor`: (B, 2)), with the rotation and scale about it that fit the path best; sorted by
-    the new Chamfer distance."""
-    batch = candidates.batch
-    if len(batch) == 0:
+    (`motor`: (B, 2)), with the rotation and scale about it that fit the path best, in two
+    parts at once (`parallel`, as `place` is); sorted by the new Chamfer distance."""
+    if len(candidates) == 0:
         return candidates
+    parts = split(np.arange(len(candidates)))
+    calls = [partial(_pin, candidates.subset(part), target, motor[part]) for part in parts]
+    both = reduce(merged, run_parts(calls))
+    return both.subset(np.lexsort((np.concatenate(parts), both.chamfer)))  # ties as given
+
+
+def _pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candidates:
+    """`pin` in one process, unsorted."""
+    batch = candidates.batch
     result = validate(batch, keep_motion=True)
     paths = torch.as_tensor(result.end_effector_paths(batch), dtype=torch.float64)
     pivot = torch.as_tensor(batch.positions[:, 0])
@@ -92,9 +102,7 @@ def pin(candidates: Candidates, target: np.ndarray, motor: np.ndarray) -> Candid
     factor = factor.double()
     chamfer = _chamfer(_turn(even, factor), goal)
     placed = _about(batch, factor, motor)
-    score = np.nan_to_num(chamfer.numpy(), nan=np.inf)
-    order = np.argsort(score, kind="stable")
-    return Candidates(placed.subset(order), score[order], candidates.source[order])
+    return Candidates(placed, np.nan_to_num(chamfer.numpy(), nan=np.inf), candidates.source)
 
 
 def pin_stroke(candidates: Candidates, goal: Goal, motor: np.ndarray) -> Candidates:
@@ -141,9 +149,9 @@ def _fit_about_origin(u: torch.Tensor, v: torch.Tensor, factor: torch.Tensor) ->
     """One ICP step: the scale and rotation about the origin, as (s cos, s sin) (B, 2), that
     best map the points u (B, k, 2) onto v (B, m, 2) when each point is paired with its nearest
     on the other curve, both ways (least squares, in closed form)."""
-    d = torch.cdist(_turn(u, factor), v)  # (B, k, m)
-    to_v = v.gather(1, d.argmin(2)[..., None].expand(-1, -1, 2))  # (B, k, 2) partners of u's
-    to_u = u.gather(1, d.argmin(1)[..., None].expand(-1, -1, 2))  # (B, m, 2) of v's points
+    d = torch.cdist(_turn(u, factor), v)  # (B, k, m); min's indices: argmin's, found sooner
+    to_v = v.gather(1, d.min(2).indices[..., None].expand(-1, -1, 2))  # (B, k, 2) u's partners
+    to_u = u.gather(1, d.min(1).indices[..., None].expand(-1, -1, 2))  # (B, m, 2) of v's points
     src, dst = torch.cat([u, to_u], 1), torch.cat([to_v, v], 1)
     dot = (src * dst).sum((1, 2))
     cross = (src[..., 0] * dst[..., 1] - src[..., 1] * dst[..., 0]).sum(1)
