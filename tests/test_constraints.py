@@ -279,3 +279,24 @@ def test_a_ground_box_alone_pins_each_crank_pivot_outside_it_at_its_nearest_poin
     assert moved.chamfer[1] < 0.5  # fitted about it
     unpinned = pinned(placed, Constraints(min_link=0.1), partial(pin, target=path))
     assert unpinned is placed
+
+
+def test_pinning_a_batch_places_each_candidate_as_it_would_be_placed_alone():
+    """`pin` works in two parts at once: each candidate still gets the placement it gets alone
+    (about its own motor point), and the batch comes back sorted by the new error."""
+    mech = classic.crank_rocker()
+    path = end_effector_path(mech, 200)[0]
+    pivot = mech.positions[0]
+    turns = ((0.0, 1.0), (0.4, 1.3), (-1.0, 0.7), (2.5, 1.1), (0.2, 0.5))  # angle, scale
+    copies = [mech.replace(positions=pivot + (mech.positions - pivot) @ rotation(a).T * s)
+              for a, s in turns]  # fmt: skip
+    batch = LinkageBatch.from_mechanisms(copies)
+    motor = pivot + np.arange(5)[:, None] * np.array([0.05, -0.02])  # one point each
+    together = pin(Candidates(batch, np.zeros(5), source=np.arange(5)), path, motor)
+    assert np.all(np.diff(together.chamfer) >= 0) and sorted(together.source) == list(range(5))
+    for row, k in enumerate(together.source):
+        alone = pin(Candidates(batch.subset([k]), np.zeros(1), source=np.array([k])), path,
+                    motor[k : k + 1])  # fmt: skip
+        assert together.batch.positions[row, 0].tolist() == motor[k].tolist()
+        assert np.allclose(together.batch.positions[row], alone.batch.positions[0], atol=1e-9)
+        assert together.chamfer[row] == pytest.approx(alone.chamfer[0], abs=1e-9)
