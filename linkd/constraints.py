@@ -267,9 +267,9 @@ def _measure(batch: LinkageBatch, c: Constraints, motion) -> dict:
 
 
 def _bounds(low: np.ndarray, high: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """(B, 4) x0, y0, x1, y1 of the joints where mask (B, N), each joint reaching from `low`
-    to `high` (B, N, 2): the joints' own extremes over the turn are taken first, along its
-    contiguous axis, which is what makes the envelope cheap to screen."""
+    """(B, 4) x0, y0, x1, y1 of the joints where mask (B, N), each reaching from `low` to
+    `high` (B, N, 2). The envelope passes each joint's extremes over the turn, reduced along
+    the paths' contiguous axis: masking every point of every path took most of a screen."""
     low = np.where(mask[..., None], low, np.inf).min(1)
     high = np.where(mask[..., None], high, -np.inf).max(1)
     return np.concatenate([low, high], 1)
