@@ -8,7 +8,7 @@ import pytest
 
 from linkd.cli import main
 from linkd.design.atlas import build, load
-from linkd.design.propose import SOURCES, place
+from linkd.design.propose import PINNED_POOL, SOURCES, own_frame, place
 from linkd.design.refine import RefineSettings
 from linkd.errors import InputError
 from linkd.validator import validate
@@ -21,7 +21,7 @@ def atlas():
 
 def test_build_is_deterministic_and_indexes_moving_joints(atlas):
     again = build(200, seed=5)
-    for name in ("positions", "fixed", "links", "mechanism", "joint", "shape"):
+    for name in ("positions", "fixed", "links", "mechanism", "joint", "shape", "pivot"):
         assert np.array_equal(getattr(atlas, name), getattr(again, name)), name
     assert len(atlas) > len(atlas.positions)  # several paths per mechanism on average
     whole = atlas.batch(np.arange(len(atlas.positions)))
@@ -38,6 +38,11 @@ def test_saved_atlas_reads_back_and_bad_files_are_refused(atlas, tmp_path):
     (tmp_path / "bad.npz").write_text("not an atlas")
     with pytest.raises(InputError, match=r"bad\.npz: not a linkd atlas"):
         load(tmp_path / "bad.npz")
+    arrays = dict(np.load(tmp_path / "atlas.npz"))
+    arrays["meta"] = np.array('{"format": "linkd-atlas/1"}')
+    np.savez(tmp_path / "old.npz", **arrays)
+    with pytest.raises(InputError, match=r"old\.npz: a linkd-atlas/1 file, not linkd-atlas/2"):
+        load(tmp_path / "old.npz")
 
 
 def test_a_path_of_the_atlas_is_found_first_and_placed_exactly(atlas):
@@ -53,6 +58,41 @@ def test_a_path_of_the_atlas_is_found_first_and_placed_exactly(atlas):
     target = (turned - turned.mean(0)) / np.sqrt(((turned - turned.mean(0)) ** 2).sum(1).mean())
     placed = place(atlas.query(target, 5), target)
     assert len(placed) >= 1 and placed.chamfer[0] < 0.02
+
+
+def test_own_frame_is_blind_to_turning_mirroring_and_scaling_curve_and_point_alike():
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    curve = np.stack([2 * np.cos(t) + 0.3 * np.cos(2 * t), np.sin(t)], -1)  # wide, not symmetric
+    point = np.array([0.5, -1.5])
+    mirror_turn = np.array([[0.6, 0.8], [0.8, -0.6]])  # a reflection, then scaled and moved
+    moved = curve @ mirror_turn * 4.0 + 7.0, point @ mirror_turn * 4.0 + 7.0
+    here, there = own_frame(curve[None], point[None]), own_frame(moved[0][None], moved[1][None])
+    rms = np.sqrt((curve**2).sum(1).mean())  # the curve is centred on the origin
+    assert np.allclose(here, there) and np.allclose(here, [[1.5 / rms, 0.5 / rms]], atol=0.01)
+
+
+def test_with_a_motor_point_half_the_paths_are_chosen_by_where_their_pivot_sits(atlas):
+    """A target that is one of the atlas's paths, turned and scaled, with the motor where that
+    path's crank pivot went: half the paths found are the nearest by shape, that path first;
+    the other half, of the next paths by shape, those whose pivot lies where the motor lies
+    in the target's frame."""
+    entry = 123
+    whole = atlas.batch(atlas.mechanism[[entry]])
+    motion = validate(whole, n_angles=400, keep_motion=True).motion
+    joint = atlas.joint[entry]
+    path = np.stack([motion.x[0, joint], motion.y[0, joint]], -1)
+    turn = np.array([[0.6, -0.8], [0.8, 0.6]]) * 3.0
+    target, motor = path @ turn + 5.0, whole.positions[0, 0] @ turn + 5.0
+    centre, size = target.mean(0), np.sqrt(((target - target.mean(0)) ** 2).sum(1).mean())
+    target, motor = (target - centre) / size, (motor - centre) / size
+    found = atlas.nearest(target, 6, motor)
+    pool = atlas.nearest(target, 6 * PINNED_POOL)
+    assert len(found) == 6 and list(found[:3]) == list(pool[:3])
+    assert atlas.pivot[found[0]].tolist() == atlas.pivot[entry].tolist()  # that path, or its twin
+    rest = pool[3:]
+    off = np.linalg.norm(atlas.pivot[rest].astype(float) - atlas.pivot[entry], axis=1)
+    assert set(found[3:]) == set(rest[np.argsort(off)[:3]])  # as near as the f16 pivots say
+    assert not set(found[3:]) <= set(pool[:6])  # not simply the next by shape
 
 
 def test_atlas_build_command(tmp_path, capsys):

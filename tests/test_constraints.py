@@ -7,16 +7,17 @@ from functools import partial
 
 import numpy as np
 import pytest
+import torch
 
 from linkd import classic, constraints
 from linkd.batch import LinkageBatch
 from linkd.cli import main
 from linkd.constraints import Box, Constraints, check, measure_batch
-from linkd.curves import read_curve, resample, write_curve
+from linkd.curves import normalise, read_curve, resample, write_curve
 from linkd.design.constrained import SOFT, pin, pinned, screen
 from linkd.design.pipeline import DesignOptions, design
-from linkd.design.propose import Candidates, sub_mechanisms
-from linkd.design.refine import RefineSettings
+from linkd.design.propose import Candidates, own_frame, sub_mechanisms
+from linkd.design.refine import RefineSettings, resample_closed
 from linkd.design.select import curve_error, end_effector_path
 from linkd.export import export_mechanism
 from linkd.generator import GeneratorSettings, generate
@@ -25,6 +26,7 @@ from linkd.graph import from_graph
 from linkd.kinematics import trace
 from linkd.mechanism import Mechanism
 from linkd.topology import assembly_plan
+from linkd.validator import validate
 
 
 def parse(**given) -> Constraints:
@@ -300,3 +302,25 @@ def test_pinning_a_batch_places_each_candidate_as_it_would_be_placed_alone():
         assert together.batch.positions[row, 0].tolist() == motor[k].tolist()
         assert np.allclose(together.batch.positions[row], alone.batch.positions[0], atol=1e-9)
         assert together.chamfer[row] == pytest.approx(alone.chamfer[0], abs=1e-9)
+
+
+def test_with_a_motor_point_sub_mechanisms_whose_pivot_sits_there_are_offered():
+    """Half the sub-mechanisms offered are the nearest by shape, as without a motor point; the
+    other half lie nearer it, their pivots where the motor sits in the target's own frame."""
+    pool = LinkageBatch.from_graphs(generate(60, seed=2, settings=GeneratorSettings(5, 8)).graphs)
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    target = np.stack([np.cos(t), 0.5 * np.sin(t) + 0.2 * np.cos(2 * t)], 1)
+    target = normalise(target)[0]
+    motor = np.array([0.3, -2.0])
+
+    def offsets(subs: LinkageBatch) -> np.ndarray:
+        result = validate(subs, keep_motion=True)
+        curves = resample_closed(torch.as_tensor(result.end_effector_paths(subs)), 64).numpy()
+        want = own_frame(resample_closed(torch.as_tensor(target)[None], 64).numpy(), motor[None])
+        return np.linalg.norm(own_frame(curves, subs.positions[:, 0]) - want, axis=1)
+
+    plain = sub_mechanisms(pool, target, keep=8)
+    pinned = sub_mechanisms(pool, target, keep=8, motor=motor)
+    shared = {p.tobytes() for p in plain.positions} & {p.tobytes() for p in pinned.positions}
+    assert len(pinned) == 8 and len(shared) >= 4  # the nearest half by shape kept
+    assert np.sort(offsets(pinned))[:4].mean() < np.sort(offsets(plain))[:4].mean()

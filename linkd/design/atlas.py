@@ -32,15 +32,16 @@ from linkd.graph import MAX_NODES
 from linkd.sample import MOVES, spread
 from linkd.validator import validate
 
-from .propose import descriptor
+from .propose import descriptor, nearest_shapes, own_frame
 from .refine import resample_closed
 
-FORMAT = "linkd-atlas/1"
+FORMAT = "linkd-atlas/2"
 DEFAULT_PATH = Path(str(importlib.resources.files("linkd.assets") / "atlas.npz"))  # shipped
 CHUNK = 2000  # mechanisms generated per seeded job
 ANGLES = 128  # crank angles each path is traced at for its descriptor
 SHAPE_POINTS = 64  # points by arc length the descriptor is taken from
 ARC_TOLERANCE = 0.01  # paths this close to a circle or arc are left out (circle_residual)
+FAR = 1000.0  # pivots further than this many RMS radii from their path are stored as this far
 _UPPER = np.triu_indices(MAX_NODES, 1)
 
 
@@ -55,6 +56,7 @@ class Atlas:
     mechanism: np.ndarray  # (E,) uint32, the mechanism each path belongs to
     joint: np.ndarray  # (E,) uint8, the joint that traces it
     shape: np.ndarray  # (E, D) uint8, quantised descriptor (`quantise`)
+    pivot: np.ndarray  # (E, 2) float16, the crank pivot in the path's own frame (`own_frame`)
     meta: dict = field(default_factory=dict)
     _codes: torch.Tensor | None = field(default=None, repr=False)
 
@@ -74,21 +76,27 @@ class Atlas:
         positions = self.positions[rows].astype(np.float64)
         return LinkageBatch(positions, fixed, valid, adjacency, valid.sum(1) - 1)
 
-    def nearest(self, target: np.ndarray, count: int) -> np.ndarray:
+    def nearest(
+        self, target: np.ndarray, count: int, motor: np.ndarray | None = None
+    ) -> np.ndarray:
         """Indices of the `count` paths whose descriptors are nearest the target's, nearest
-        first. target: (M, 2) closed curve."""
+        first (with a `motor` point, as `propose.nearest_shapes` chooses). target: (M, 2)
+        closed curve."""
         if self._codes is None:
             self._codes = torch.as_tensor(self.shape).float()
         curve = torch.as_tensor(np.ascontiguousarray(target), dtype=torch.float64)[None]
         even = resample_closed(curve, SHAPE_POINTS)
         query = torch.as_tensor(quantise(descriptor(even).numpy())).float()
         gap = torch.cdist(query, self._codes)[0]
-        count = min(count, len(gap))
-        return torch.topk(gap, count, largest=False).indices.numpy()
+        want = None if motor is None else own_frame(even.numpy(), np.asarray(motor)[None])
+        return nearest_shapes(gap, count, self.pivot, want)
 
-    def query(self, target: np.ndarray, count: int) -> LinkageBatch:
-        """The sub-mechanisms tracing the `count` paths most like the target, nearest first."""
-        entries = self.nearest(target, count)
+    def query(
+        self, target: np.ndarray, count: int, motor: np.ndarray | None = None
+    ) -> LinkageBatch:
+        """The sub-mechanisms tracing the `count` paths most like the target (with a `motor`
+        point: `nearest`'s choice), nearest first."""
+        entries = self.nearest(target, count, motor)
         rows, index = np.unique(self.mechanism[entries], return_inverse=True)
         whole = self.batch(rows).subset(index.reshape(-1))
         return whole.sub_mechanisms(np.arange(len(entries)), self.joint[entries].astype(int))
@@ -107,7 +115,7 @@ class Atlas:
             scratch.unlink(missing_ok=True)
 
 
-_ARRAYS = ("positions", "fixed", "links", "n_nodes", "mechanism", "joint", "shape")
+_ARRAYS = ("positions", "fixed", "links", "n_nodes", "mechanism", "joint", "shape", "pivot")
 
 
 def quantise(descriptors: np.ndarray) -> np.ndarray:
@@ -123,12 +131,13 @@ def load(path: str | Path | None = None) -> Atlas:
         raise InputError(f"{path}: {'is a folder, not' if path.is_dir() else 'no such'} atlas")
     try:
         with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in _ARRAYS}
             meta = json.loads(str(data["meta"]))
-    except (OSError, KeyError, ValueError):
+            if meta.get("format") != FORMAT:
+                raise InputError(f"{path}: a {meta.get('format')} file, not {FORMAT} (build it "
+                                 "again with linkd atlas build)")  # fmt: skip
+            arrays = {k: data[k] for k in _ARRAYS}
+    except (OSError, KeyError, ValueError, AttributeError):
         raise InputError(f"{path}: not a linkd atlas (a .npz of linkd atlas build)") from None
-    if meta.get("format") != FORMAT:
-        raise InputError(f"{path}: not a {FORMAT} file")
     return Atlas(**arrays, meta=meta)
 
 
@@ -150,6 +159,7 @@ def build_chunk(job: tuple[int, int, int]) -> Atlas:
     arc = circle_residual(centred / np.maximum(rms, 1e-12)[:, None, None]) < ARC_TOLERANCE
     rows, joints, curves = rows[~arc], joints[~arc], curves[~arc]
     even = resample_closed(torch.as_tensor(curves), SHAPE_POINTS)
+    pivot = own_frame(even.numpy(), batch.positions[rows, 0])
     used, mechanism = np.unique(rows, return_inverse=True)
     part = batch.subset(used)
     upper = part.adjacency[:, _UPPER[0], _UPPER[1]]
@@ -161,6 +171,7 @@ def build_chunk(job: tuple[int, int, int]) -> Atlas:
         mechanism.reshape(-1).astype(np.uint32),
         joints.astype(np.uint8),
         quantise(descriptor(even).numpy()),
+        pivot.clip(max=FAR).astype(np.float16),
     )
 
 

@@ -28,6 +28,7 @@ from .parallel import PARTS, run_parts, split
 # (conditioning curves (C, 200, 2), samples per curve, seed) -> graph matrices (C * S, 20, 24)
 Proposer = Callable[[np.ndarray, int, int], np.ndarray]
 HARMONICS = 16  # Fourier harmonics of the shape descriptor that pre-ranks sub-mechanisms
+PINNED_POOL = 16  # with a motor point, paths are chosen from this many times as many by shape
 
 
 @dataclass
@@ -135,10 +136,15 @@ def propose(
 
 
 def sub_mechanisms(
-    batch: LinkageBatch, target: np.ndarray, keep: int, max_joints: int | None = None
+    batch: LinkageBatch,
+    target: np.ndarray,
+    keep: int,
+    max_joints: int | None = None,
+    motor: np.ndarray | None = None,
 ) -> LinkageBatch:
     """The `keep` sub-mechanisms of `batch` (in dyadic order, as decoded from graph matrices)
-    whose paths look most like the target (of those with at most `max_joints` joints).
+    whose paths look most like the target (of those with at most `max_joints` joints; with a
+    `motor` point on the target's curve, as `nearest_shapes` chooses).
 
     Every moving joint of a valid dyadic linkage traces a curve of its own, and the joints it
     hangs on (its ancestors, down to the crank and the ground) form a smaller valid linkage
@@ -160,7 +166,12 @@ def sub_mechanisms(
     if len(rows) > keep:
         curves = resample_closed(paths[rows, joints].double(), 64)
         gap = descriptor(curves) - descriptor(torch.as_tensor(target)[None])
-        best = torch.topk(gap.norm(dim=1), keep, largest=False).indices.sort().values.numpy()
+        pivots, want = None, None
+        if motor is not None:
+            even = resample_closed(torch.as_tensor(target)[None], 64).numpy()
+            pivots = own_frame(curves.numpy(), batch.positions[rows, 0])
+            want = own_frame(even, np.asarray(motor)[None])
+        best = np.sort(nearest_shapes(gap.norm(dim=1), keep, pivots, want))
         rows, joints = rows[best], joints[best]
     return batch.sub_mechanisms(rows, joints)
 
@@ -173,6 +184,39 @@ def descriptor(curves: torch.Tensor) -> torch.Tensor:
     k = torch.arange(1, HARMONICS + 1)
     pairs = torch.stack([z[:, k], z[:, -k]], -1).sort(-1).values.flatten(1)
     return pairs / pairs[:, :2].sum(1, keepdim=True).clamp_min(1e-12)
+
+
+def own_frame(curves: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(B, 2) where each point (B, 2) lies in its closed curve's (B, M, 2, equally spaced by arc
+    length) own frame: about its centroid, along its principal axes (least spread first), in
+    units of its RMS radius, each coordinate's sign dropped, so that turning or mirroring a
+    curve with its point leaves this unchanged."""
+    centred = curves - curves.mean(1, keepdims=True)
+    rms = np.sqrt((centred**2).sum(-1).mean(1)).clip(1e-12)
+    _, axes = np.linalg.eigh(np.einsum("bmi,bmj->bij", centred, centred))
+    offset = (points - curves.mean(1)) / rms[:, None]
+    return np.abs(np.einsum("bi,bij->bj", offset, axes))
+
+
+def nearest_shapes(
+    gap: torch.Tensor, count: int, pivots: np.ndarray | None = None, want: np.ndarray | None = None
+) -> np.ndarray:
+    """Indices of the `count` smallest shape gaps (E,), smallest first. With `want`, where the
+    motor point lies in the target's own frame (`own_frame`, (1, 2)), only the first half so;
+    the other half, of the next PINNED_POOL times as many, those whose crank pivot (`pivots`:
+    (E, 2), in their paths' own frames) lies nearest it. Turned and scaled about its pivot
+    alone, as a motor point pins it, a path can only fit a target whose motor sits where its
+    pivot does."""
+    pool = min(count * (1 if want is None else PINNED_POOL), len(gap))
+    entries = torch.topk(gap, pool, largest=False).indices.numpy()
+    if want is None or pivots is None or pool <= count:
+        return entries[:count]
+    half = count // 2
+    off = np.linalg.norm(pivots[entries[half:]].astype(float) - want, axis=1)
+    chosen = np.concatenate(
+        [np.arange(half), half + np.argsort(off, kind="stable")[: count - half]]
+    )
+    return entries[np.sort(chosen)]
 
 
 def place(batch: LinkageBatch, target: np.ndarray, source: np.ndarray | None = None) -> Candidates:

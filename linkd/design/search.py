@@ -183,12 +183,13 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
             if atlas is None:
                 note("no atlas (build one with `linkd atlas build`)")
             else:
-                batches.append(atlas.query(target, atlas_paths))
+                batches.append(atlas.query(target, atlas_paths, None if stroke else inner.motor_at))
                 note(f"{len(batches[-1])} paths of {len(atlas):,}")
     with stages.stage("align", "placing designs on the curve") as note:
         report["valid"] = int(validate(batches[0]).valid.sum())
         if o.every_joint:
-            batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints)
+            batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints,
+                                        None if stroke else inner.motor_at)  # fmt: skip
         source = np.concatenate([np.full(len(b), k) for k, b in enumerate(batches)])
         batch = joined(batches)
         if inner.max_joints is not None:  # the sub-mechanisms were chosen within it already
