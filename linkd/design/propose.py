@@ -168,7 +168,7 @@ def sub_mechanisms(
         gap = descriptor(curves) - descriptor(torch.as_tensor(target)[None])
         pivots, want = None, None
         if motor is not None:
-            even = resample_closed(torch.as_tensor(target)[None], 64).numpy()
+            even = resample_closed(torch.as_tensor(target)[None], 64).numpy()  # as the paths
             pivots = own_frame(curves.numpy(), batch.positions[rows, 0])
             want = own_frame(even, np.asarray(motor)[None])
         best = np.sort(nearest_shapes(gap.norm(dim=1), keep, pivots, want))
@@ -209,7 +209,7 @@ def nearest_shapes(
     pivot does."""
     pool = min(count * (1 if want is None else PINNED_POOL), len(gap))
     entries = torch.topk(gap, pool, largest=False).indices.numpy()
-    if want is None or pivots is None or pool <= count:
+    if want is None or pool <= count:
         return entries[:count]
     half = count // 2
     off = np.linalg.norm(pivots[entries[half:]].astype(float) - want, axis=1)

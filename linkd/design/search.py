@@ -177,19 +177,19 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
     report["rounds"], report["refine_count"] = rounds, refine_count
     around_count = around_width(o.time_budget, o.around)
     batches = [LinkageBatch.from_graphs(graphs)]
+    motor = None if stroke else inner.motor_at  # a loop's candidates chosen for it too
     if o.atlas:  # a stroke by its loop: one arc of the paths found may trace it
         with stages.stage("atlas", "looking the shape up in the atlas") as note:
             atlas = _atlas(o.atlas_path)
             if atlas is None:
                 note("no atlas (build one with `linkd atlas build`)")
             else:
-                batches.append(atlas.query(target, atlas_paths, None if stroke else inner.motor_at))
+                batches.append(atlas.query(target, atlas_paths, motor))
                 note(f"{len(batches[-1])} paths of {len(atlas):,}")
     with stages.stage("align", "placing designs on the curve") as note:
         report["valid"] = int(validate(batches[0]).valid.sum())
         if o.every_joint:
-            batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints,
-                                        None if stroke else inner.motor_at)  # fmt: skip
+            batches[0] = sub_mechanisms(batches[0], target, o.placed, inner.max_joints, motor)
         source = np.concatenate([np.full(len(b), k) for k, b in enumerate(batches)])
         batch = joined(batches)
         if inner.max_joints is not None:  # the sub-mechanisms were chosen within it already
