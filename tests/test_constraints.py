@@ -320,7 +320,7 @@ def test_with_a_motor_point_sub_mechanisms_whose_pivot_sits_there_are_offered():
         return np.linalg.norm(own_frame(curves, subs.positions[:, 0]) - want, axis=1)
 
     plain = sub_mechanisms(pool, target, keep=8)
-    pinned = sub_mechanisms(pool, target, keep=8, motor=motor)
-    shared = {p.tobytes() for p in plain.positions} & {p.tobytes() for p in pinned.positions}
-    assert len(pinned) == 8 and len(shared) >= 4  # the nearest half by shape kept
-    assert np.sort(offsets(pinned))[:4].mean() < np.sort(offsets(plain))[:4].mean()
+    by_pivot = sub_mechanisms(pool, target, keep=8, motor=motor)
+    shared = {p.tobytes() for p in plain.positions} & {p.tobytes() for p in by_pivot.positions}
+    assert len(by_pivot) == 8 and len(shared) >= 4  # the nearest half by shape kept
+    assert np.sort(offsets(by_pivot))[:4].mean() < np.sort(offsets(plain))[:4].mean()

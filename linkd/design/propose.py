@@ -191,10 +191,11 @@ def own_frame(curves: np.ndarray, points: np.ndarray) -> np.ndarray:
     length) own frame: about its centroid, along its principal axes (least spread first), in
     units of its RMS radius, each coordinate's sign dropped, so that turning or mirroring a
     curve with its point leaves this unchanged."""
-    centred = curves - curves.mean(1, keepdims=True)
+    centre = curves.mean(1)
+    centred = curves - centre[:, None]
     rms = np.sqrt((centred**2).sum(-1).mean(1)).clip(1e-12)
     _, axes = np.linalg.eigh(np.einsum("bmi,bmj->bij", centred, centred))
-    offset = (points - curves.mean(1)) / rms[:, None]
+    offset = (points - centre) / rms[:, None]
     return np.abs(np.einsum("bi,bij->bj", offset, axes))
 
 
