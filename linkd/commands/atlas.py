@@ -12,7 +12,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("atlas", help="build the atlas of mechanisms that design searches")
     actions = p.add_subparsers(dest="action", required=True, parser_class=type(p))
     b = actions.add_parser("build", help="generate random mechanisms and index their paths")
-    b.add_argument("--count", type=int, default=100_000, help="random mechanisms to generate")
+    b.add_argument("--count", type=int, default=300_000, help="random mechanisms to generate")
     b.add_argument("--seed", type=int, default=9, help="random seed (the shipped atlas: 9)")
     b.add_argument("--workers", type=int, default=1, help="processes")
     b.add_argument("--out", help="atlas file (default: the one linkd design uses)")
