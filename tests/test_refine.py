@@ -40,12 +40,20 @@ def test_lbfgs_solves_independent_ill_conditioned_problems():
         f = torch.where(rows == 1, torch.nan, f)
         return f, 2 * c * (x - 1)
 
+    calls = []
+
+    def counted(x, rows):
+        calls.append(len(rows))
+        return evaluate(x, rows)
+
     x0 = torch.zeros(3, 4, dtype=torch.float64)
-    x, iterations = minimise(evaluate, x0, 200, first_step=0.1)
+    x, iterations = minimise(counted, x0, 200, first_step=0.1)
     assert torch.allclose(x[0], torch.ones(4, dtype=torch.float64), atol=1e-6)
     assert torch.allclose(x[2], torch.ones(4, dtype=torch.float64), atol=1e-6)
     assert torch.equal(x[1], x0[1])  # never moved onto a non-finite value
-    assert iterations < 200  # stops once every row has converged
+    # It stops once every row has converged, and says it did all it was asked (fewer would
+    # mean a deadline cut it short).
+    assert len(calls) < 100 and iterations == 200
 
 
 def test_lbfgs_rows_do_not_wait_for_each_others_line_searches():
@@ -58,18 +66,21 @@ def test_lbfgs_rows_do_not_wait_for_each_others_line_searches():
         smooth = (rows == 0)[:, None]
         return torch.where(smooth[:, 0], bowl[0], kink[0]), torch.where(smooth, bowl[1], kink[1])
 
-    calls = []
+    def counted(calls):
+        def evaluated(x, rows):
+            calls.append(rows.clone())
+            return evaluate(x, rows)
 
-    def counted(x, rows):
-        calls.append(len(rows))
-        return evaluate(x, rows)
+        return evaluated
 
-    alone, needed = minimise(evaluate, torch.zeros(1, 3, dtype=torch.float64), 200)
+    alone_calls, calls = [], []
+    alone, _ = minimise(counted(alone_calls), torch.zeros(1, 3, dtype=torch.float64), 200)
     start = torch.tensor([[0.0, 0.0, 0.0], [0.004, 0.004, 0.004]], dtype=torch.float64)
-    x, iterations = minimise(counted, start, needed)
+    x, _ = minimise(counted(calls), start, 200)
     assert torch.allclose(alone[0], torch.ones(3, dtype=torch.float64), atol=1e-6)
-    assert torch.equal(x[0], alone[0])  # as fast as alone, beside a row that backtracks
-    assert len(calls) == iterations + 1  # one evaluation of the rows still searching each time
+    assert torch.equal(x[0], alone[0])
+    # As fast as alone, beside a row that backtracks: evaluated as often, once an iteration.
+    assert sum(bool((rows == 0).any()) for rows in calls) == len(alone_calls) < 200
 
 
 def test_polyline_chamfer_ignores_sampling_density():

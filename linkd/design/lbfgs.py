@@ -36,7 +36,9 @@ def minimise(
     deadline: float | None = None,
     on_iteration: Callable[[int], None] | None = None,
 ) -> tuple[torch.Tensor, int]:
-    """Minimise the B independent functions of `evaluate` from x (B, D); returns (x, iterations).
+    """Minimise the B independent functions of `evaluate` from x (B, D); returns x and the
+    iterations run, or all of them where every row converged sooner: fewer than asked means the
+    deadline cut the minimisation short.
 
     iterations: evaluations of every row still searching, each row trying one step of its own
     line search (a row whose first step is accepted goes on with its next direction).
@@ -49,9 +51,9 @@ def minimise(
     every = torch.arange(len(x))
     f, g = evaluate(x, every)
     state.aim(every, g)
-    done = 0
     if not state.active.any():
-        return x, done
+        return x, iterations
+    done = 0
     for done in range(1, iterations + 1):
         rows = every[state.active]
         step, direction, slope = state.step[rows], state.direction[rows], state.slope[rows]
@@ -70,7 +72,9 @@ def minimise(
         state.aim(torch.cat([good, given_up]), g)
         if on_iteration is not None:
             on_iteration(done)
-        if not state.active.any() or (deadline is not None and time.monotonic() > deadline):
+        if not state.active.any():
+            return x, iterations
+        if deadline is not None and time.monotonic() > deadline:
             break
     return x, done
 

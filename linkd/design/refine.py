@@ -69,7 +69,8 @@ class RefineSettings:
 class RefineResult:
     positions: np.ndarray  # (B, N, 2) best iterate within the hard limits (else the input)
     chamfer: np.ndarray  # (B,) its Chamfer distance to the target (inf if none was valid)
-    iterations: int  # L-BFGS iterations run
+    iterations: int  # L-BFGS iterations run (all those asked for where every row converged
+    # sooner: fewer means the deadline cut refinement short)
 
     @property
     def ok(self) -> np.ndarray:
