@@ -9,8 +9,9 @@ BUDGET_STEP = 30.0  # seconds: the default budget, the unit a longer one widens 
 DEFAULT_ROUNDS = 6  # refinement rounds in the default budget: the first and five that grow the
 # best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s; six,
 # once the dyads' backward was written out, 0.0244 in 17.5 s)
-STROKE_ROUNDS = 3  # on an open or timed stroke, whose copies are placed more slowly (open
-# letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s, four 0.0629 in 24 s)
+STROKE_ROUNDS = 6  # on an open or timed stroke, whose copies are placed more slowly (open
+# letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s, four 0.0629 in 24 s; on a
+# machine 1.4 times faster, three 0.0461 in 12 s, six 0.0367 in 18 s)
 STROKE_FIRST = 3  # times as many designs refined in a stroke's first round as in a later one
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 FIRST_SHARE = 0.5  # of the time left for refinement, the most the first round may take where
