@@ -109,3 +109,20 @@ def test_of_designs_that_trace_the_curve_alike_the_simplest_goes_first(monkeypat
 
     difference = errors[1] - errors[0]
     assert first(1.01 * difference) == 1 and first(0.99 * difference) == 0
+
+
+def test_a_smaller_design_ranked_near_the_best_is_weighed_beyond_the_pool(monkeypatch):
+    """With room in the pool for the six-bar alone, the crank rocker behind it is still weighed
+    (and goes first, the two alike) while it is ranked near the best, and not when it is far."""
+    six = classic.stephenson_six_bar()
+    points = end_effector_path(six)[0]
+    monkeypatch.setattr(pipeline, "SIMPLER_POOL", 1)
+    monkeypatch.setattr(pipeline, "SIMPLER_FLOOR", 10.0)  # any two designs are alike
+
+    def order(ranked: list[float]) -> list[int]:
+        candidates = Candidates(LinkageBatch.from_mechanisms([six, ROCKER]), np.array(ranked))
+        return pipeline._simplest_first(np.array([0, 1]), candidates, Similarity(), points,
+                                        DesignOptions()).tolist()  # fmt: skip
+
+    assert order([0.1, 0.11]) == [1, 0]
+    assert order([0.1, 30.0]) == [0, 1]

@@ -132,9 +132,9 @@ def test_a_longer_budget_searches_wider_unless_told():
     assert search_width(30, None, None) == (6, 1024, 48)  # the defaults
     assert search_width(120, None, None) == (30, 4096, 96)  # rounds until the deadline
     assert search_width(120, 1, 10, 4) == (1, 10, 4)
-    # An open or timed stroke has its own rounds, its first three times as wide.
-    assert search_width(30, None, None, stroke=True) == (6, 1024, 144)
-    assert search_width(120, None, None, stroke=True) == (30, 4096, 288)
+    # An open or timed stroke, which has no polish, has more rounds.
+    assert search_width(30, None, None, stroke=True) == (8, 1024, 48)
+    assert search_width(120, None, None, stroke=True) == (32, 4096, 96)
     assert search_width(30, 3, None, 20, stroke=True) == (3, 1024, 20)
     assert around_width(30, None) == 4 and around_width(120, None) == 16
     assert around_width(120, 2) == 2

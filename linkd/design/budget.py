@@ -9,10 +9,10 @@ BUDGET_STEP = 30.0  # seconds: the default budget, the unit a longer one widens 
 DEFAULT_ROUNDS = 6  # refinement rounds in the default budget: the first and five that grow the
 # best designs (drawn shapes, two seeds: three rounds 0.0275 in 11 s, five 0.0247 in 17 s; six,
 # once the dyads' backward was written out, 0.0244 in 17.5 s)
-STROKE_ROUNDS = 6  # on an open or timed stroke, whose copies are placed more slowly (open
-# letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s, four 0.0629 in 24 s; on a
-# machine 1.4 times faster, three 0.0461 in 12 s, six 0.0367 in 18 s)
-STROKE_FIRST = 3  # times as many designs refined in a stroke's first round as in a later one
+STROKE_ROUNDS = 8  # on an open or timed stroke: its copies are placed more slowly, but it has no
+# polish (open letters, two seeds: one round 0.1019 in 15 s, three 0.0666 in 17 s; on a machine
+# 1.4 times faster, three 0.0461 in 12 s, six 0.0367 in 18 s, and with its first round no wider
+# than a loop's, eight 0.0297 in 17 s)
 AROUND = 4  # designs a later round searches around, for each 30 s of the budget
 FIRST_SHARE = 0.5  # of the time left for refinement, the most the first round may take where
 # later rounds follow: on a slow or busy machine it would otherwise take all of it (on one 2.4
@@ -32,11 +32,10 @@ def search_width(
     30 s; for every further 30 s, 1024 paths and 16 designs more (each round also searches
     around more designs, `around_width`) and up to eight rounds more, as many as the budget's
     deadline leaves time for. The deadline also stops refinement early on a slow or busy
-    machine. An open or timed `stroke` has STROKE_ROUNDS, and STROKE_FIRST times as many
-    designs in its first round: each of its later rounds refines a STROKE_FIRST share."""
+    machine. An open or timed `stroke` has STROKE_ROUNDS."""
     steps = budget_steps(time_budget)
     more = 8 * (steps - 1)
-    count = refine_count or 16 * (2 + steps) * (STROKE_FIRST if stroke else 1)
+    count = refine_count or 16 * (2 + steps)
     rounds = rounds or (STROKE_ROUNDS if stroke else DEFAULT_ROUNDS) + more
     return rounds, atlas_paths or 1024 * steps, count
 

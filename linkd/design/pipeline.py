@@ -284,8 +284,15 @@ def _simplest_first(order: np.ndarray, candidates: Candidates, frame, points, o)
     SIMPLER_WITHIN of the best of them (or SIMPLER_FLOOR, a difference no one sees) put first,
     fewest joints (pruned) first, then the rest of the pool by that error: where several trace
     the curve alike, as on a curve a four-bar traces, the one with the fewest parts is
-    delivered."""
-    pool = order[:SIMPLER_POOL]
+    delivered. The pool also holds the best-ranked design of each joint count ranked near the
+    best (twice as near as alike): later rounds fill the top of the ranking with grown copies
+    of a few designs, which would crowd out a smaller one that traces the curve as well."""
+    chamfer = candidates.chamfer[order]
+    near = chamfer <= max(chamfer[0] * (1 + 2 * SIMPLER_WITHIN), chamfer[0] + 2 * SIMPLER_FLOOR)
+    size = candidates.batch.valid[order].sum(1)
+    smallest = [np.flatnonzero(near & (size == n))[0] for n in np.unique(size[near])]
+    picked = np.union1d(np.arange(min(SIMPLER_POOL, len(order))), smallest).astype(int)
+    pool = order[picked]
     error, joints = np.empty(len(pool)), np.empty(len(pool), int)
     for k, row in enumerate(map(int, pool)):
         mech = to_mechanism(pruned(candidates.batch.subset([row])), 0, frame, o.units,
@@ -295,7 +302,7 @@ def _simplest_first(order: np.ndarray, candidates: Candidates, frame, points, o)
         joints[k] = mech.n_nodes
     alike = error <= max(error.min() * (1 + SIMPLER_WITHIN), error.min() + SIMPLER_FLOOR)
     first = np.lexsort((error, np.where(alike, joints, 0), ~alike))
-    return np.concatenate([pool[first], order[len(pool) :]])
+    return np.concatenate([pool[first], np.delete(order, picked)])
 
 
 def _ranked(order: np.ndarray, grown: np.ndarray, fall_back: Callable[[], bool]) -> Iterator:

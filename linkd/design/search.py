@@ -30,7 +30,6 @@ from .atlas import load as load_atlas
 from .budget import (
     BUDGET_STEP,
     FIRST_SHARE,
-    STROKE_FIRST,
     around_width,
     budget_steps,
     search_width,
@@ -255,9 +254,8 @@ def _explore(goal: Goal, target: np.ndarray, inner: Constraints, o: DesignOption
                 first = len(candidates)
                 candidates = merged(candidates, found)
                 placed = np.concatenate([placed, found.chamfer])
-                width = refine_count // STROKE_FIRST if stroke else refine_count
-                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)), width,
-                                                     width), int)  # fmt: skip
+                rows = first + np.array(diverse_best(found.batch, np.arange(len(found)),
+                                                     refine_count, refine_count), int)  # fmt: skip
                 progress = _progress(stages, len(rows), nearby_settings)
                 done = refine_nearby(candidates, rows, progress)
                 if done < nearby_settings.iterations:
