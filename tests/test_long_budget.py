@@ -1,5 +1,5 @@
-"""A longer budget's search (linkd.design.search): the default budget's search inside it, and a
-polish that goes on down the ranking while time remains."""
+"""A longer budget's search (linkd.design.search): the default budget's search inside it, on a
+loop or a stroke, and a polish that goes on down the ranking while time remains."""
 
 import time
 
@@ -17,14 +17,15 @@ from linkd.design.stages import Stages
 from linkd.design.stroke import Goal
 
 
-def _search(pool, budget: float, seconds: float) -> tuple:
-    """The candidates and report of a search for a crank-rocker's curve with `budget`, its
-    deadline `seconds` from now."""
+def _search(pool, budget: float, seconds: float, closed: bool = True) -> tuple:
+    """The candidates and report of a search for a crank-rocker's curve (or, not `closed`, the
+    first half of it as a stroke) with `budget`, its deadline `seconds` from now."""
     options = DesignOptions(candidates=12, time_budget=budget, refine_settings=QUICK,
                             atlas=False)  # fmt: skip
     report, deadline = {}, time.monotonic() + seconds
-    found = search(Goal(_unit_crank_rocker(), True, False), Constraints(), options,
-                   pool_proposer(pool), Stages(False), deadline, report)  # fmt: skip
+    target = _unit_crank_rocker() if closed else _unit_crank_rocker()[:100]
+    found = search(Goal(target, closed, False), Constraints(), options, pool_proposer(pool),
+                   Stages(False), deadline, report)  # fmt: skip
     return found, report
 
 
@@ -42,6 +43,19 @@ def test_a_longer_budget_holds_the_default_search(pool, monkeypatch):
     long, long_report = _search(pool, 20, 42)
     assert "default_search" not in short_report
     assert long_report["default_search"]["best"] == short_report["polish"]["before"]
+    assert long_report["refined"] > short_report["refined"]
+    assert np.min(long.chamfer) <= np.min(short.chamfer)
+
+
+def test_a_longer_budget_holds_the_default_search_on_a_stroke_too(pool, monkeypatch):
+    """A stroke has no polish, but a double budget's search holds the default run's all the
+    same: the same best design, then a wider search; it delivers no worse."""
+    for module in (budget_module, search_module):
+        monkeypatch.setattr(module, "BUDGET_STEP", 10.0)
+    short, short_report = _search(pool, 10, 600, closed=False)
+    long, long_report = _search(pool, 20, 60, closed=False)
+    assert "default_search" not in short_report and "polish" not in long_report
+    assert long_report["default_search"]["best"] == np.min(short.chamfer)
     assert long_report["refined"] > short_report["refined"]
     assert np.min(long.chamfer) <= np.min(short.chamfer)
 

@@ -84,10 +84,10 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     target's frame); each candidate's `chamfer` is its latest curve error (on an open or timed
     target: its stroke's Chamfer distance, or its timing error). Fills `report`.
 
-    A longer budget on a drawn loop first runs the default budget's search (the designs a
-    default run with the same seed finds) and then its own wider one, and polishes the best of
-    both: a wide search settles in different basins, and now and then in worse ones, so a
-    longer budget could otherwise deliver a worse design than the default."""
+    A longer budget first runs the default budget's search (the designs a default run with the
+    same seed finds) and then its own wider one, and on a drawn loop polishes the best of both:
+    a wide search settles in different basins, and now and then in worse ones, so a longer
+    budget could otherwise deliver a worse design than the default."""
     stroke = goal.stroke
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     graphs = _proposals(proposer, target, o, stages, report)
@@ -95,17 +95,18 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
     longer = budget_steps(o.time_budget) > 1
     default_search = None
-    if polishing and o.rounds is None and longer:
+    if o.refine and o.rounds is None and longer:
         # The default run's own deadline: as far before the wide search's as its budget is
-        # shorter, less the polish's share of the difference.
-        end = rounds_end - (1 - POLISH_SHARE) * (o.time_budget - BUDGET_STEP)
+        # shorter, less the polish's share of the difference (a stroke has no polish).
+        share = POLISH_SHARE if polishing else 0.0
+        end = rounds_end - (1 - share) * (o.time_budget - BUDGET_STEP)
         short = replace(o, time_budget=BUDGET_STEP)
         default_report: dict = {}
         default_search = _explore(goal, target, inner, short, graphs, stages, end, default_report)
         report["budget_cut_refinement"] = default_report.get("budget_cut_refinement", False)
         report["default_search"] = {"best": float(np.min(default_search[0].chamfer))}
-        # Polished as a default run polishes: the design it would deliver is then in hand.
-        _polish_stage(default_search[0], goal, inner, short, deadline, stages, None)
+        if polishing:  # as a default run polishes: the design it would deliver is in hand
+            _polish_stage(default_search[0], goal, inner, short, deadline, stages, None)
     candidates, placed = _explore(goal, target, inner, o, graphs, stages, rounds_end, report)
     if default_search is not None:
         found, found_placed = default_search
