@@ -288,10 +288,10 @@ def _simplest_first(order: np.ndarray, candidates: Candidates, frame, points, o)
     best (twice as near as alike): later rounds fill the top of the ranking with grown copies
     of a few designs, which would crowd out a smaller one that traces the curve as well."""
     chamfer = candidates.chamfer[order]
-    near = chamfer <= max(chamfer[0] * (1 + 2 * SIMPLER_WITHIN), chamfer[0] + 2 * SIMPLER_FLOOR)
-    size = candidates.batch.valid[order].sum(1)
-    smallest = [np.flatnonzero(near & (size == n))[0] for n in np.unique(size[near])]
-    picked = np.union1d(np.arange(min(SIMPLER_POOL, len(order))), smallest).astype(int)
+    bound = max(chamfer[0] * (1 + 2 * SIMPLER_WITHIN), chamfer[0] + 2 * SIMPLER_FLOOR)
+    near = np.flatnonzero(chamfer <= bound)  # ranking positions, best first
+    _, smallest = np.unique(candidates.batch.valid[order[near]].sum(1), return_index=True)
+    picked = np.union1d(np.arange(min(SIMPLER_POOL, len(order))), near[smallest])
     pool = order[picked]
     error, joints = np.empty(len(pool)), np.empty(len(pool), int)
     for k, row in enumerate(map(int, pool)):

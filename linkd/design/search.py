@@ -92,13 +92,13 @@ def search(goal: Goal, inner: Constraints, o: DesignOptions, proposer: Proposer 
     target = goal.loop(N_POINTS) if stroke else goal.points  # what designs are sampled for
     graphs = _proposals(proposer, target, o, stages, report)
     polishing = o.refine and not stroke
-    rounds_end = deadline - (POLISH_SHARE * o.time_budget if polishing else 0.0)
+    share = POLISH_SHARE if polishing else 0.0  # of the budget kept for the polish
+    rounds_end = deadline - share * o.time_budget
     longer = budget_steps(o.time_budget) > 1
     default_search = None
     if o.refine and o.rounds is None and longer:
         # The default run's own deadline: as far before the wide search's as its budget is
         # shorter, less the polish's share of the difference (a stroke has no polish).
-        share = POLISH_SHARE if polishing else 0.0
         end = rounds_end - (1 - share) * (o.time_budget - BUDGET_STEP)
         short = replace(o, time_budget=BUDGET_STEP)
         default_report: dict = {}
