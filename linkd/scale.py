@@ -29,11 +29,11 @@ def across(points: np.ndarray) -> float:
 
 
 def _metres(value: float) -> str:
-    """A length in words: '1 mm', '100 m', '1 km'."""
+    """A length in words, to three figures as the size it restates: '1 mm', '100 m', '1 km'."""
     for unit, size in (("km", 1e3), ("m", 1.0), ("mm", 1e-3)):
         if value >= size:
-            return f"{value / size:g} {unit}"
-    return f"{value / 1e-3:g} mm"
+            return f"{value / size:.3g} {unit}"
+    return f"{value / 1e-3:.3g} mm"
 
 
 def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float, float]) -> str:

@@ -107,3 +107,15 @@ def test_a_mechanism_far_from_the_origin_exports_and_verifies(tmp_path, offset):
     assert validate_mechanism(mech)[0] == 0
     _, report = export_verified(mech, tmp_path, {"mjcf", "stl"})
     assert report.passed, report.failed
+
+
+def test_a_size_is_stated_once_to_three_figures(tmp_path, capsys):
+    """A tiny mechanism in millimetres is named once (its size in words would say the same), a
+    huge one once more in kilometres, both to three figures."""
+    cases = [(1.234e-10, "4.94e-10 mm across;"), (1.234e10, "4.94e+10 mm across (4.94e+04 km);")]
+    for scale, said in cases:
+        path = tmp_path / "m.json"
+        classic.crank_rocker().transformed(Similarity(scale)).save(path)
+        assert main(["export", str(path), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert said in err and "4.936" not in err
