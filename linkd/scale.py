@@ -29,7 +29,7 @@ def across(points: np.ndarray) -> float:
 
 
 def _metres(value: float) -> str:
-    """A length in words, to three figures as the size it restates: '1 mm', '100 m', '1 km'."""
+    """A length in words, to three figures like the size it restates: '1 mm', '100 m', '1 km'."""
     for unit, size in (("km", 1e3), ("m", 1.0), ("mm", 1e-3)):
         if value >= size:
             return f"{value / size:.3g} {unit}"
