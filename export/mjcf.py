@@ -69,7 +69,9 @@ class Servo:
 
 
 def _fmt(*values: float) -> str:
-    return " ".join(f"{float(v):.12g}" for v in values)
+    """Numbers as MJCF text, each the shortest that reads back exactly: a mechanism far from
+    the origin keeps its joints where they are, to the last bit."""
+    return " ".join(repr(float(v)) for v in values)
 
 
 class _Builder:

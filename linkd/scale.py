@@ -9,6 +9,11 @@ mobility at 10 km while its pose solver asked for 1e-12 m; it now asks what the 
 rounding allows (`linkd.verify.pose`), and a 10 km crank rocker verifies, but the range was
 not widened on one example. A designed mechanism spans its curve
 and usually several times more, so a curve is held to a smaller top size than a mechanism.
+
+Where a mechanism lies matters too: the model is in the user's frame, and double precision
+rounds a joint a billion sizes from the origin by a few ten-millionths of its size, which
+verification measures (a designed 315 mm mechanism verifies 1e5 km out, 3e8 sizes, and fails
+at 3e5 km, 1e9 sizes). Ten million sizes keeps a margin.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from linkd.mechanism import UNITS_IN_METRES
 
 MECHANISM_RANGE_M = (1e-4, 1e3)  # across, metres: what export and verification handle
 CURVE_RANGE_M = (5e-5, 1e2)  # across, metres: leaves room for the mechanism around the curve
+MAX_DISTANCE = 1e7  # farthest point from the origin, in sizes across
 
 
 def across(points: np.ndarray) -> float:
@@ -37,11 +43,19 @@ def _metres(value: float) -> str:
 
 
 def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float, float]) -> str:
-    """'' when `points` (in `units`) span a buildable size, else the one-line reason."""
+    """'' when `points` (in `units`) span a buildable size within MAX_DISTANCE sizes of the
+    origin, else the one-line reason."""
     size = across(points) * UNITS_IN_METRES[units]
     low, high = limits
     if low <= size <= high:
-        return ""
+        farthest = float(np.linalg.norm(np.reshape(points, (-1, 2)), axis=1).max())
+        if farthest <= MAX_DISTANCE * across(points):
+            return ""
+        return (
+            f"the {what} lies {farthest:.3g} {units} from the origin, "
+            f"{farthest / across(points):.3g} times its size; linkd builds {what}s within "
+            f"{MAX_DISTANCE:.0e} times their size of the origin (move it nearer)"
+        )
     given, metric = f"{across(points):.3g} {units}", _metres(size) if size else "0"
     return (
         f"the {what} is {given} across{'' if metric == given else f' ({metric})'}; "

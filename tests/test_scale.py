@@ -98,12 +98,16 @@ def test_a_millimetre_sized_model_weighs_its_parts_in_proportion(tmp_path):
 @pytest.mark.parametrize("offset", [1e7, 1e9])  # 10 km and 1000 km, in mm
 def test_a_mechanism_far_from_the_origin_exports_and_verifies(tmp_path, offset):
     """In the user's frame, far from its origin: the ground's meshes are written about the motor
-    pivot (MuJoCo keeps meshes in single precision), the validator compares joints about their
-    centroid and the pose solver asks only what rounding there allows."""
+    pivot (MuJoCo keeps meshes in single precision), the MJCF's numbers read back exactly (at
+    twelve figures a motor pivot 1000 km out moved by microns), the validator compares joints
+    about their centroid and the pose solver asks only what rounding there allows. Turned by a
+    radian and moved by pi / 3 times the offset, so that no coordinate is round."""
     from linkd.validator import validate_mechanism
     from linkd.verified import export_verified
 
-    mech = classic.crank_rocker().transformed(Similarity(100.0, translation=(offset, -offset)))
+    turn = np.array([[np.cos(1.0), -np.sin(1.0)], [np.sin(1.0), np.cos(1.0)]])
+    move = np.array([offset, -offset]) * np.pi / 3
+    mech = classic.crank_rocker().transformed(Similarity(100.0, turn, move))
     assert validate_mechanism(mech)[0] == 0
     _, report = export_verified(mech, tmp_path, {"mjcf", "stl"})
     assert report.passed, report.failed
@@ -119,3 +123,21 @@ def test_a_size_is_stated_once_to_three_figures(tmp_path, capsys):
         assert main(["export", str(path), "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err
         assert said in err and "4.936" not in err
+
+
+def test_a_mechanism_too_far_from_the_origin_is_refused(tmp_path, capsys):
+    """1e12 mm out, 2.5e9 times its size: rounding there would move its joints by more than
+    verification allows, so it is refused up front, as the curve of a design is."""
+    mech = classic.crank_rocker().transformed(Similarity(100.0, translation=np.array([1e12, 0])))
+    path, out = tmp_path / "m.json", tmp_path / "out"
+    mech.save(path)
+    assert main(["export", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "lies 1e+12 mm from the origin" in err[0] and "1e+07 times" in err[0]
+    assert not out.exists()
+    curve = tmp_path / "curve.csv"
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    np.savetxt(curve, np.c_[1e10 + 50 * np.cos(t), 25 * np.sin(t)], delimiter=",")
+    assert main(["design", str(curve), "--out", str(out)]) == 2
+    assert "curve lies 1e+10 mm from the origin" in capsys.readouterr().err
+    assert not out.exists()
