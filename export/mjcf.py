@@ -69,9 +69,9 @@ class Servo:
 
 
 def _fmt(*values: float) -> str:
-    """Numbers as MJCF text, each the shortest that reads back exactly: a mechanism far from
-    the origin keeps its joints where they are, to the last bit."""
-    return " ".join(repr(float(v)) for v in values)
+    """Numbers as MJCF text, each the shortest that reads back exactly (a whole number without
+    its ".0"): a mechanism far from the origin keeps its joints where they are, to the bit."""
+    return " ".join(repr(float(v)).removesuffix(".0") for v in values)
 
 
 class _Builder:
