@@ -45,18 +45,19 @@ def _metres(value: float) -> str:
 def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float, float]) -> str:
     """'' when `points` (in `units`) span a buildable size within MAX_DISTANCE sizes of the
     origin, else the one-line reason."""
-    size = across(points) * UNITS_IN_METRES[units]
+    span = across(points)
+    size = span * UNITS_IN_METRES[units]
     low, high = limits
     if low <= size <= high:
         farthest = float(np.linalg.norm(np.reshape(points, (-1, 2)), axis=1).max())
-        if farthest <= MAX_DISTANCE * across(points):
+        if farthest <= MAX_DISTANCE * span:
             return ""
         return (
-            f"the {what} lies {farthest:.3g} {units} from the origin, "
-            f"{farthest / across(points):.3g} times its size; linkd builds {what}s within "
-            f"{MAX_DISTANCE:.0e} times their size of the origin (move it nearer)"
+            f"the {what} lies {farthest:.3g} {units} from the origin, {farthest / span:.3g} "
+            f"times its size; linkd builds {what}s within {MAX_DISTANCE:.0e} times their size "
+            "of the origin (move it nearer)"
         )
-    given, metric = f"{across(points):.3g} {units}", _metres(size) if size else "0"
+    given, metric = f"{span:.3g} {units}", _metres(size) if size else "0"
     return (
         f"the {what} is {given} across{'' if metric == given else f' ({metric})'}; "
         f"linkd builds {what}s from {_metres(low)} to {_metres(high)} across "

@@ -126,7 +126,7 @@ def test_a_size_is_stated_once_to_three_figures(tmp_path, capsys):
 
 
 def test_a_mechanism_too_far_from_the_origin_is_refused(tmp_path, capsys):
-    """1e12 mm out, 2.5e9 times its size: rounding there would move its joints by more than
+    """1e12 mm out, about 3e9 times its size: rounding there would move its joints by more than
     verification allows, so it is refused up front, as the curve of a design is."""
     mech = classic.crank_rocker().transformed(Similarity(100.0, translation=np.array([1e12, 0])))
     path, out = tmp_path / "m.json", tmp_path / "out"
