@@ -48,20 +48,20 @@ def size_problem(points: np.ndarray, units: str, what: str, limits: tuple[float,
     span = across(points)
     size = span * UNITS_IN_METRES[units]
     low, high = limits
-    if low <= size <= high:
-        farthest = float(np.linalg.norm(np.reshape(points, (-1, 2)), axis=1).max())
-        if farthest <= MAX_DISTANCE * span:
-            return ""
+    if not low <= size <= high:
+        given, metric = f"{span:.3g} {units}", _metres(size) if size else "0"
         return (
-            f"the {what} lies {farthest:.3g} {units} from the origin, {farthest / span:.3g} "
-            f"times its size; linkd builds {what}s within {MAX_DISTANCE:.0e} times their size "
-            "of the origin (move it nearer)"
+            f"the {what} is {given} across{'' if metric == given else f' ({metric})'}; "
+            f"linkd builds {what}s from {_metres(low)} to {_metres(high)} across "
+            f"(rescale it, or {'set --units' if what == 'curve' else 'change its units'})"
         )
-    given, metric = f"{span:.3g} {units}", _metres(size) if size else "0"
+    farthest = float(np.linalg.norm(np.reshape(points, (-1, 2)), axis=1).max())
+    if farthest <= MAX_DISTANCE * span:
+        return ""
     return (
-        f"the {what} is {given} across{'' if metric == given else f' ({metric})'}; "
-        f"linkd builds {what}s from {_metres(low)} to {_metres(high)} across "
-        f"(rescale it, or {'set --units' if what == 'curve' else 'change its units'})"
+        f"the {what} lies {farthest:.3g} {units} from the origin, {farthest / span:.3g} times "
+        f"its size; linkd builds {what}s within {MAX_DISTANCE:.0e} times their size of the "
+        "origin (move it nearer)"
     )
 
 

@@ -8,7 +8,7 @@ from linkd import classic
 from linkd.cli import main
 from linkd.errors import InputError
 from linkd.export import export_mechanism
-from linkd.geometry import Similarity
+from linkd.geometry import Similarity, rotation
 from linkd.scale import check_curve_size
 
 
@@ -105,9 +105,8 @@ def test_a_mechanism_far_from_the_origin_exports_and_verifies(tmp_path, offset):
     from linkd.validator import validate_mechanism
     from linkd.verified import export_verified
 
-    turn = np.array([[np.cos(1.0), -np.sin(1.0)], [np.sin(1.0), np.cos(1.0)]])
     move = np.array([offset, -offset]) * np.pi / 3
-    mech = classic.crank_rocker().transformed(Similarity(100.0, turn, move))
+    mech = classic.crank_rocker().transformed(Similarity(100.0, rotation(1.0), move))
     assert validate_mechanism(mech)[0] == 0
     _, report = export_verified(mech, tmp_path, {"mjcf", "stl"})
     assert report.passed, report.failed
