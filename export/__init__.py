@@ -9,7 +9,8 @@ pins, `routing`; where bent ones cannot either, a mechanism made of modules on o
 stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
-or several do, `forked`), plates become STL meshes (`meshes`, outlined by `plates`) and the
+or several do, `forked`, and last the crank turns on a turntable, `turntable`), plates become
+STL meshes (`meshes`, outlined by `plates`) and the
 bodies, hinges, pins, loop closures and crank servo become `mechanism.xml` with a `scene.xml`
 around it (`mjcf`).
 """
@@ -50,6 +51,7 @@ from .refusal import why_refused
 from .rods import keyed, pin_rods
 from .routing import bent_layers
 from .strapped import strapped_layers
+from .turntable import turntable_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "export_mechanism", "hinge_angles", "joint_paths", "qpos_at",
@@ -58,8 +60,8 @@ __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
 FORMATS = frozenset({"mjcf", "stl"})
 CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  framed_layers: "modules between frames", strapped_layers: "eccentric straps",
-                 braced_layers: "split plates and brackets",
-                 forked_layers: "forked parts"}  # fmt: skip
+                 braced_layers: "split plates and brackets", forked_layers: "forked parts",
+                 turntable_layers: "the crank on a turntable"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -67,7 +69,7 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
 # search finds none there, the widths between are not tried.
-SCREENED = frozenset({braced_layers, forked_layers})
+SCREENED = frozenset({braced_layers, forked_layers, turntable_layers})
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -145,7 +147,8 @@ def _layered(
     first QUICK_STRAPS strap choices, at the frames' width or wider, may still do with fewer
     layers), then parts turn on sheaves as eccentric straps (`strapped`), and then plates are
     cut into arms and ground pins are held by brackets or as stubs from both plates
-    (`braced`, unless `options.brackets` is off), then a part forks; those two are SCREENED.
+    (`braced`, unless `options.brackets` is off), then a part forks, then the crank turns on a
+    turntable (`turntable`); those three are SCREENED.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -162,7 +165,7 @@ def _layered(
     if modular(assembly) and not quick:  # a quick small search, before the straps' large one
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
-        layerings += [braced_layers, forked_layers]
+        layerings += [braced_layers, forked_layers, turntable_layers]
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:
@@ -213,7 +216,9 @@ def _layered(
         if why:
             culprits = f"; with straight parts, {why} alone cannot all be kept clear"
     frames = ", framed" if framed_layers in layerings else ""
-    tried = f"straight, bent{frames}, strapped, split and forked parts{widths} tried{culprits}"
+    turned = ", a turntable" if turntable_layers in layerings else ""
+    tried = f"straight, bent{frames}, strapped, split and forked parts{turned}{widths} tried"
+    tried += culprits
     raise ValueError(f"{first} ({tried})")
 
 
@@ -223,7 +228,7 @@ def _write_meshes(
     """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
     convex pieces, which the model collides). Returns the model's mesh name -> relative path,
     plate name -> relative path of its whole STL, and the model's mesh name -> volume (m^3)."""
-    from .meshes import bent_mesh, plate_mesh, sheave_mesh, strap_meshes, write_stl
+    from .meshes import bent_mesh, disc_mesh, plate_mesh, strap_meshes, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
@@ -234,11 +239,16 @@ def _write_meshes(
         points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
         if plate.sheave:  # the model's sheave is a cylinder, like a pin
-            write_stl(out_dir / whole[plate.name],
-                      sheave_mesh(points, plate.sheave * unit, *size[1:]), plate.name)  # fmt: skip
+            sheave = disc_mesh(points, plate.sheave * unit, *size[1:], True)
+            write_stl(out_dir / whole[plate.name], sheave, plate.name)
+            continue
+        if plate.disc:  # a turntable's: a plate like any other, whose hull is the disc
+            solid = disc_mesh(points, plate.disc * unit, *size[1:], False)
+            write_stl(out_dir / whole[plate.name], solid, plate.name)
+            model[plate.name], volumes[plate.name] = whole[plate.name], solid.volume
             continue
         if plate.bore:
-            solid, pieces = strap_meshes(points, plate.bore * unit, *size)
+            solid, pieces = strap_meshes(points, plate.bore * unit, *size, hull=plate.part > 0)
             write_stl(out_dir / whole[plate.name], solid, plate.name)
             for k, piece in enumerate(pieces):
                 name = f"{plate.name}_piece{k}"
@@ -326,6 +336,8 @@ def describe_parts(
         if plate.sheave:
             entry |= {"kind": "sheave", "diameter": 2 * plate.sheave,
                       "fixed_in": assembly.parts[plate.part].name}  # fmt: skip
+        if plate.disc:
+            entry["disc"] = 2 * plate.disc
         out.append(entry)
     fixed = {j: p for p, arms in layout.arms.items() for j in keyed(a.joints for a in arms)}
     fixed |= {assembly.pins[k].joint: fork.part for k, fork in layout.forks.items()}

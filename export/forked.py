@@ -17,11 +17,13 @@ forked at once, no two sharing a joint, with at most one ground pin on a bracket
 width: an arm is the part itself (a link) or the arm of a plate between the same joints, and
 its copies share its clearances. A single fork is not searched when it does not layer even
 with no ground pins at all. No part but the crank is cut at the motor pivot: the crank must
-turn on a pin in the frame (or its own rod), where the motor is.
+turn on a pin in the frame (or its own rod), where the motor is. `fork_search` is the same
+search on candidates another construction has changed (`turntable`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -71,12 +73,26 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     """Layers with one part forked (and at most one ground pin on a bracket), within MAX_FORKS
     layer searches, else with one of the first MAX_SETS sets of forks `forkset` screens.
     ValueError when none layers."""
+    candidates = swept_candidates(assembly, paths, sizes)
+    return fork_search(assembly, candidates, len(paths), sizes, drivable)
+
+
+def fork_search(
+    assembly: Assembly,
+    candidates: tuple[Assembly, list[tuple], np.ndarray, Conflicts],
+    first: int,
+    sizes: Sizes,
+    allowed: Callable[[Assembly, tuple[int, int]], bool],
+    brackets: bool = True,
+) -> Layout:
+    """`forked_layers` on given candidates (`braced.swept_candidates`, their posts' joints from
+    `first` on), with the forks `allowed` allows, and brackets only where `brackets`."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
-    union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
-    bracket = best_brackets(conflicts, roles)
+    union, roles, posts, conflicts = candidates
+    bracket = best_brackets(conflicts, roles) if brackets else {}
     moving = sorted(range(1, len(assembly.parts)), key=lambda q: len(assembly.parts[q].joints))
     forks = [((q, s),) for q in moving for s in assembly.parts[q].joints]
-    forks = [fork for fork in forks if _drivable(assembly, fork[0])]
+    forks = [fork for fork in forks if allowed(assembly, fork[0])]
     searches, refusal = 0, None
 
     def search(chosen: tuple, held: int | None, relaxed: bool = False):
@@ -93,19 +109,20 @@ def forked_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
 
     for fork in forks[:MAX_FORKS]:  # first the bound: no ground pins at all
         search(fork, None, relaxed=True)
-    tries = [(fork, held) for held in [None, *ground] for fork in forks]
+    held_by = [None, *(g for g in ground if g in bracket)]
+    tries = [(fork, held) for held in held_by for fork in forks]
     for fork, held in tries[: MAX_FORKS - searches]:
         found = search(fork, held)
         if found is not None:
-            return _real(assembly, found[1], found[0], roles, posts, fork, len(paths))
-    for chosen, held in fork_sets(assembly, union, roles, conflicts, _drivable, bracket, MAX_SETS):
+            return _real(assembly, found[1], found[0], roles, posts, fork, first)
+    for chosen, held in fork_sets(assembly, union, roles, conflicts, allowed, bracket, MAX_SETS):
         found = search(chosen, held)
         if found is not None:
-            return _real(assembly, found[1], found[0], roles, posts, chosen, len(paths))
+            return _real(assembly, found[1], found[0], roles, posts, chosen, first)
     raise refusal or ValueError("no forked part layers")
 
 
-def _drivable(assembly: Assembly, fork: tuple[int, int]) -> bool:
+def drivable(assembly: Assembly, fork: tuple[int, int]) -> bool:
     """Whether a motor in the frame still drives the crank: a fork of another part may not
     cut the pin at the motor pivot, where the crank would turn on a rod of that part."""
     part, shaft = fork

@@ -118,7 +118,7 @@ def _framed(assembly: Assembly, paths: np.ndarray, sizes: Sizes, modules: tuple)
         spans.append((min(at), max(at)))
     return Layout(real, spans, (), frames[-1] + 1, least_gap(conflicts, layers, sizes), False,
                   arms={crank: arms}, forks=forks, frames=tuple(frames[1:-1]),
-                  frame_posts=_posts(paths, motor, sizes))  # fmt: skip
+                  frame_posts=posts_beyond(paths, motor, sizes))  # fmt: skip
 
 
 def _modules(assembly: Assembly, apart: bool) -> tuple[list[list[int]], list[tuple[int, ...]]]:
@@ -249,7 +249,7 @@ def _layers_at(layers: np.ndarray, index: dict, arms: tuple, p: int, joint: int)
     return [arm.layer for arm in arms if joint in arm.joints]
 
 
-def _posts(paths: np.ndarray, motor: int, sizes: Sizes) -> tuple[tuple[float, float], ...]:
+def posts_beyond(paths: np.ndarray, motor: int, sizes: Sizes) -> tuple[tuple[float, float], ...]:
     """POSTS points round the motor's pivot, as far beyond its farthest point swept by any
     joint as a bracket's post is (`braced.POST_MARGIN` link widths)."""
     centre = paths[motor, 0]

@@ -97,6 +97,19 @@ class Strap:
 
 
 @dataclass(frozen=True)
+class Turntable:
+    """The crank made a disc of `radius` round the motor's pivot `joint` (`turntable`), with no
+    pin there: it turns in the bore of a ground ring on its layer, held by `posts` from the base."""
+
+    part: int
+    joint: int
+    layer: int
+    radius: float  # mechanism units, as the bore's
+    bore: float
+    posts: tuple[tuple[float, float], ...]
+
+
+@dataclass(frozen=True)
 class Layout:
     layers: np.ndarray  # (P,) layer of every part; the ground's (base plate) is 0
     pin_spans: list[tuple[int, int]]  # (lowest, highest) layer of each pin, plates included
@@ -113,6 +126,7 @@ class Layout:
     straps: tuple[Strap, ...] = ()  # parts that turn on sheaves (`strapped`)
     frames: tuple[int, ...] = ()  # layers of ground plates between modules (`framed`)
     frame_posts: tuple[tuple[float, float], ...] = ()  # posts holding them, base to cover
+    turntable: Turntable | None = None  # the crank on a turntable (`turntable`)
 
 
 @dataclass(frozen=True)
@@ -329,6 +343,9 @@ def _layout(assembly, conflicts, sizes, moving_layers, cover, stack, minimal) ->
     spans, top, stubs = [], [], {}
     for k, pin in enumerate(assembly.pins):
         mine = sorted(int(layers[m]) for m in pin.members if m)
+        if not mine:  # a ground pin nothing turns on (the motor's, under a turntable)
+            spans.append((0, 0))
+            continue
         if 0 not in pin.members:
             spans.append((mine[0], mine[-1]))
             continue

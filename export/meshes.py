@@ -3,8 +3,9 @@
 manifold3d does the 2D hull, the holes and the extrusion, and guarantees a closed 2-manifold;
 the binary STL is a few lines of numpy (trimesh, which the tests use to check the files, would
 cost seconds of import time here). Plates are convex apart from their holes, which is also the
-shape MuJoCo collides (the convex hull of a mesh). A bent link (`routing`) is not convex: it
-is written whole, to be made in one piece, and bar by bar, each bar convex, for MuJoCo.
+shape MuJoCo collides (the convex hull of a mesh): a turntable's disc too. A bent link
+(`routing`) is not convex: it is written whole, to be made in one piece, and bar by bar, each
+bar convex, for MuJoCo.
 """
 
 from __future__ import annotations
@@ -55,12 +56,18 @@ def bent_mesh(chain: np.ndarray, width: float, hole_diameter: float, thickness: 
 
 
 def strap_meshes(
-    points: np.ndarray, bore: float, width: float, hole_diameter: float, thickness: float
+    points: np.ndarray,
+    bore: float,
+    width: float,
+    hole_diameter: float,
+    thickness: float,
+    hull: bool = True,
 ) -> tuple[Solid, list[Solid]]:
     """A strap (`strapped`): a ring of a half width round a bore of radius `bore` at points[0],
-    a bar from the ring out to each other point, and the hull of those (two or more), with
-    pin holes at those points. Returns the whole plate and its convex pieces for MuJoCo: the
-    ring as quadrilaterals whose inner sides touch the bore, the bars and the hull."""
+    a bar from the ring out to each other point, and the hull of those (two or more; not for
+    a turntable's ring, whose posts stand all round the bore), with pin holes at those points.
+    Returns the whole plate and its convex pieces for MuJoCo: the ring as quadrilaterals whose
+    inner sides touch the bore, the bars and the hull."""
     import manifold3d
 
     centre, others = points[0], points[1:]
@@ -74,7 +81,7 @@ def strap_meshes(
     ends = centre + outer * (others - centre) / np.linalg.norm(others - centre, axis=1)[:, None]
     pieces += [manifold3d.CrossSection.batch_hull(_discs(np.stack(pair), width / 2))
                for pair in zip(ends, others)]  # fmt: skip
-    if len(others) >= 2:
+    if hull and len(others) >= 2:
         pieces.append(manifold3d.CrossSection.batch_hull(_discs(others, width / 2)))
     disc = manifold3d.CrossSection.circle(outer, 4 * SEGMENTS).translate(tuple(centre))
     outline = manifold3d.CrossSection.batch_boolean([disc, *pieces[sides:]], manifold3d.OpType.Add)
@@ -84,12 +91,15 @@ def strap_meshes(
     ]
 
 
-def sheave_mesh(points: np.ndarray, radius: float, hole_diameter: float, thickness: float) -> Solid:
-    """A sheave: a disc of `radius` round points[0], with a pin hole at every point."""
+def disc_mesh(
+    points: np.ndarray, radius: float, hole_diameter: float, thickness: float, centre_hole: bool
+) -> Solid:
+    """A disc of `radius` round points[0], with a pin hole at every other point, and at the
+    centre too where a pin passes there (a sheave's; a turntable's disc has none)."""
     import manifold3d
 
     disc = manifold3d.CrossSection.circle(radius, 4 * SEGMENTS).translate(tuple(points[0]))
-    return _solid(disc, points, hole_diameter, thickness)
+    return _solid(disc, points if centre_hole else points[1:], hole_diameter, thickness)
 
 
 def _discs(points: np.ndarray, radius: float) -> list:

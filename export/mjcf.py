@@ -143,6 +143,11 @@ class _Builder:
                           size=_fmt(plate.sheave * self.unit, self.thickness / 2),
                           pos=_fmt(0, 0, z + self.thickness / 2))  # fmt: skip
             return
+        if plate.disc and plate.name not in meshes:  # a turntable's disc, as a cylinder
+            ET.SubElement(body, "geom", name=plate.name, type="cylinder", rgba=colour,
+                          size=_fmt(plate.disc * self.unit, self.thickness / 2),
+                          pos=_fmt(*points[0], z + self.thickness / 2))  # fmt: skip
+            return
         bends = (np.reshape(plate.bends, (-1, 2)) - self.origin[plate.part]) * self.unit
         chain = np.concatenate([points[:1], bends, points[1:]]) if plate.bends else points
         if plate.bore:
@@ -181,8 +186,8 @@ class _Builder:
 
     def strap(self, plate: Plate, points: np.ndarray, z: float, colour: str) -> None:
         """A strap without meshes: its ring as boxes whose inner faces touch the bore, a bar
-        and a boss out to each other joint, and the sides of their hull (`meshes.strap_meshes`
-        for the shape)."""
+        and a boss out to each other joint, and the sides of their hull but for a turntable's
+        ring (`meshes.strap_meshes` for the shape)."""
         centre, bore, zc = points[0], plate.bore * self.unit, z + self.thickness / 2
         sides = 64
         middle, half = bore + self.width / 4, (bore + self.width / 2) * np.tan(np.pi / sides)
@@ -201,7 +206,7 @@ class _Builder:
                           pos=_fmt(*point, zc), rgba=colour)  # fmt: skip
         hull = [points[1:][k] for k in convex_hull(points[1:])]
         edges = list(zip(hull, hull[1:] + hull[:1])) if len(hull) > 2 else [tuple(hull)]
-        for k, edge in enumerate(edges if len(hull) > 1 else []):
+        for k, edge in enumerate(edges if len(hull) > 1 and plate.part else []):
             self.box(plate.part, f"{plate.name}_side{k}", edge, self.width, zc, colour)
 
     def box(self, part: int, name: str, ends: tuple, width: float, zc: float, colour: str) -> None:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from string import ascii_lowercase
 
 from .layers import Layout
@@ -30,9 +30,16 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
     index to the span of its stub from the cover) is two: `pin_spans` standing in the base, its
     stub (`<name>_top`) hanging from the cover, each through the parts within its span. A pin
     where a part forks (`forks`) is coaxial rods fixed in the forked part, `<name>a`,
-    `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20)."""
+    `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20). A
+    turntable's disc is on no pin at the motor's pivot: that pin is only there where other parts
+    turn on it."""
     rods = []
+    table = layout.turntable
     for k, pin in enumerate(assembly.pins):
+        if table and pin.joint == table.joint:  # the turntable's disc turns in its ring instead
+            pin = replace(pin, members=tuple(m for m in pin.members if m != table.part))
+            if not any(pin.members):
+                continue
         if k in layout.forks:
             fork = layout.forks[k]
             for letter, (parts, span) in zip(ascii_lowercase, fork.rods):

@@ -3,8 +3,7 @@
 
 import numpy as np
 import pytest
-from test_export_narrow import TANGLED
-from test_rounds import STUBBORN
+from test_export_narrow import STUBBORN, TANGLED
 
 from linkd import classic
 from linkd.batch import LinkageBatch

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 from planted import collision_detail
-from test_export_narrow import SNARLED, TANGLED
+from test_export_narrow import STUBBORN, TANGLED
 
 from linkd.export import NARROWER, ExportOptions, export_mechanism
 from linkd.export.layers import NoFlatLayers, assign_layers, find_conflicts, stack_layers, sweep
@@ -87,9 +87,9 @@ def test_a_straightened_bent_link_is_caught(bent, tmp_path):
 
 
 def test_what_bending_cannot_save_is_refused_in_one_line(tmp_path):
-    message = r"straight, bent, framed, strapped, split and forked parts, down to 0\.25"
+    message = r"straight, bent, strapped, split and forked parts, a turntable, down to 0\.25"
     with pytest.raises(ValueError, match=message) as refusal:
-        export_mechanism(SNARLED, tmp_path, {"mjcf"})
+        export_mechanism(STUBBORN, tmp_path, {"mjcf"})
     assert "\n" not in str(refusal.value)
 
 
@@ -98,13 +98,13 @@ def test_a_refusal_names_pins_and_parts_that_alone_cannot_be_kept_clear(tmp_path
     straight parts at the narrowest width, and each pin and each part is needed for that:
     without any one, the rest layer."""
     with pytest.raises(ValueError) as refusal:
-        export_mechanism(SNARLED, tmp_path, {"mjcf"})
+        export_mechanism(STUBBORN, tmp_path, {"mjcf"})
     named = re.search(r"with straight parts, (.*) alone cannot", str(refusal.value)).group(1)
     passing = dict(re.findall(r"(pin_\d+) \(passed by ([^)]*)\)", named))
-    assembly = assemble(SNARLED)
-    usual = resolve_sizes(SNARLED, assembly.parts, None).link_width
-    sizes = resolve_sizes(SNARLED, assembly.parts, ExportOptions(link_width=usual * NARROWER[-1]))
-    conflicts = find_conflicts(assembly, sweep(SNARLED, sizes.link_width), sizes)
+    assembly = assemble(STUBBORN)
+    usual = resolve_sizes(STUBBORN, assembly.parts, None).link_width
+    sizes = resolve_sizes(STUBBORN, assembly.parts, ExportOptions(link_width=usual * NARROWER[-1]))
+    conflicts = find_conflicts(assembly, sweep(STUBBORN, sizes.link_width), sizes)
     pins = {pin.name: k for k, pin in enumerate(assembly.pins)}
     parts = {part.name: q for q, part in enumerate(assembly.parts)}
     blocked = {pin: [parts[name] for name in names.split(", ")] for pin, names in passing.items()}

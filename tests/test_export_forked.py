@@ -9,7 +9,9 @@ import trimesh
 from planted import collision_detail, editable_copy
 
 import linkd.export.forked as forked
+import linkd.export.turntable as turntable
 from linkd.export import export_mechanism
+from linkd.export.layers import NoFlatLayers
 from linkd.export.parts import assemble
 from linkd.mechanism import Mechanism
 from linkd.verified import export_verified
@@ -92,8 +94,12 @@ def _forked_parts(out, parts: list[dict]) -> tuple[str, dict[int, list[dict]]]:
 
 
 def test_a_crank_walled_in_by_its_pins_is_forked_round_a_bracket(bicycle, monkeypatch, tmp_path):
+    def refused(*args, **kwargs):
+        raise NoFlatLayers("not on a turntable either")
+
     monkeypatch.setattr(forked, "MAX_FORKS", 0)
     monkeypatch.setattr(forked, "MAX_SETS", 0)
+    monkeypatch.setattr(turntable, "stack_layers", refused)  # its whole parts layer it too
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BICYCLE, tmp_path, {"mjcf"})
     out, result, report = bicycle
@@ -148,9 +154,9 @@ def test_no_fork_hangs_the_crank_on_another_parts_rod():
     assembly = assemble(TWIN)
     number = {part.name: q for q, part in enumerate(assembly.parts)}
     link, crank = number["link_0_5"], number["link_0_1"]
-    assert not forked._drivable(assembly, (link, 5))
-    assert forked._drivable(assembly, (link, 0))  # its shaft at the pivot: the pin stays whole
-    assert forked._drivable(assembly, (crank, 1))
+    assert not forked.drivable(assembly, (link, 5))
+    assert forked.drivable(assembly, (link, 0))  # its shaft at the pivot: the pin stays whole
+    assert forked.drivable(assembly, (crank, 1))
 
 
 def test_coaxial_rods_that_would_meet_are_made_one():

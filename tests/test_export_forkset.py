@@ -110,15 +110,15 @@ def test_the_screened_sets_are_minimal_and_share_no_joint():
     sizes = resolve_sizes(TRIPOD, assembly.parts, None)
     union, roles, _, conflicts = swept_candidates(assembly, sweep(TRIPOD, sizes.link_width), sizes)
     bracket = best_brackets(conflicts, roles)
-    sets = list(fork_sets(assembly, union, roles, conflicts, forked._drivable, bracket, 3))
+    sets = list(fork_sets(assembly, union, roles, conflicts, forked.drivable, bracket, 3))
     assert sets and len(set(sets)) == len(sets)  # each set found once
-    screen = _Screen(assembly, union, roles, conflicts, forked._drivable, bracket)
+    screen = _Screen(assembly, union, roles, conflicts, forked.drivable, bracket)
     taken = {fork: lit for fork, lit in screen.choice.items() if fork[1] is not None}
     taken |= {(0, joint): lit for joint, lit in screen.held.items()}  # the brackets
     with Solver(bootstrap_with=screen.clauses) as solver:
         for forks, held in sets:
             chosen = [*forks, *([(0, held)] if held is not None else [])]
-            assert forks and all(forked._drivable(assembly, fork) for fork in forks)
+            assert forks and all(forked.drivable(assembly, fork) for fork in forks)
             for (p, _), (q, _) in combinations(forks, 2):
                 assert not set(assembly.parts[p].joints) & set(assembly.parts[q].joints)
             off = [-lit for key, lit in taken.items() if key not in chosen]

@@ -38,8 +38,7 @@ KNOTTED = Mechanism(
 # Generated (`generate(40, 22, GeneratorSettings(min_nodes=7, max_nodes=10))`, no. 17, scaled
 # to 100 mm): links 1-3, 1-4 and 1-7 hang on the crank tip and sweep over the ground pivots 0
 # and 2 and over each other's pins; no flat layering at any width, straight, bent, strapped,
-# split on a bracket or forked. (`generate(100, 11)`'s no. 11, refused here before, is built
-# since parts turn on sheaves, and seed 2026's no. 63 since parts fork.)
+# split on a bracket or forked: it is built with the crank on a turntable.
 SNARLED = Mechanism(
     [(38.1, 38.3), (66.1, 44.5), (-63.8, 43.2), (-17.7, -4.5), (66.1, -72.6), (-13.9, 35.8),
      (-50.2, -92.8), (65.6, 93.1), (71.9, 26.2), (21.5, 59.6)],
@@ -47,6 +46,18 @@ SNARLED = Mechanism(
     [(0, 1), (0, 4), (1, 3), (1, 4), (1, 7), (2, 3), (3, 7), (4, 6), (4, 8), (4, 9), (5, 6),
      (7, 8), (8, 9)],
     (0, 1), 9,
+)  # fmt: skip
+
+# Generated (`generate(40, 56, GeneratorSettings(min_nodes=7, max_nodes=11))`, no. 30, scaled
+# to 100 mm): a design with no joint to prune that no construction builds. (Seed 2026's no.
+# 243, its end effector's sub-mechanism, refused here before, is built since parts turn on
+# sheaves; `generate(100, 11)`'s no. 11 since then too, seed 2026's no. 63 since parts fork,
+# and SNARLED since the crank turns on a turntable.)
+STUBBORN = Mechanism(
+    [(95.5, 19.5), (92.5, 50.5), (82.4, -88.3), (-68.0, -34.9), (-67.3, -26.0), (11.3, 60.9),
+     (7.4, -90.2), (77.5, 48.4)],
+    [1, 0, 1, 0, 0, 1, 0, 0],
+    [(0, 1), (0, 4), (1, 3), (1, 4), (2, 3), (3, 6), (4, 7), (5, 6), (6, 7)], (0, 1), 7,
 )  # fmt: skip
 
 
@@ -83,31 +94,27 @@ def test_export_says_when_its_links_are_narrower(tmp_path, capsys):
 def test_a_width_the_user_gives_is_kept(tmp_path):
     from linkd.export import ExportOptions
 
-    width = resolve_sizes(SNARLED, assemble(SNARLED).parts, None).link_width
+    width = resolve_sizes(STUBBORN, assemble(STUBBORN).parts, None).link_width
     with pytest.raises(ValueError, match="flat layers") as refusal:
-        export_mechanism(SNARLED, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
+        export_mechanism(STUBBORN, tmp_path, {"mjcf"}, ExportOptions(link_width=width))
     assert "usual width" not in str(refusal.value)  # no narrower width was tried
 
 
 def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     told = []
     with pytest.raises(ValueError, match=r"0\.25 of the usual width"):
-        export_mechanism(SNARLED, tmp_path, {"mjcf"}, progress=told.append)
+        export_mechanism(STUBBORN, tmp_path, {"mjcf"}, progress=told.append)
     widths = ("the usual width", "0.5 of the usual width", "0.25 of the usual width")
-    # its parts are modules on the crank's pins, which no frames layer either
-    plain = [
-        f"layering {c} at {w}"
-        for c in ("straight parts", "bent links", "modules between frames", "eccentric straps")
-        for w in widths
-    ]
+    plain = [f"layering {c} at {w}" for c in ("straight parts", "bent links", "eccentric straps")
+             for w in widths]  # fmt: skip
     # the costly ones skip half the width where a quarter does not layer
-    screened = [f"layering {c} at {w}" for c in ("split plates and brackets", "forked parts")
-                for w in widths[::2]]  # fmt: skip
+    costly = ("split plates and brackets", "forked parts", "the crank on a turntable")
+    screened = [f"layering {c} at {w}" for c in costly for w in widths[::2]]
     assert told == plain + screened + ["none layers: finding the pins that keep it from layering"]
     passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
-    target = SNARLED.positions[SNARLED.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
-    assert deliver(SNARLED, target, tmp_path, {"mjcf"}, {}, passed=passed) is None
+    target = STUBBORN.positions[STUBBORN.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
+    assert deliver(STUBBORN, target, tmp_path, {"mjcf"}, {}, passed=passed) is None
     assert [p.reason for p in passed] == ["unbuildable"]
     assert not list(tmp_path.iterdir())
 

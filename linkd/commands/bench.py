@@ -251,7 +251,11 @@ def export(args: argparse.Namespace) -> int:
                 arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
         if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
-        if report.passed and not framed and any(part["kind"] == "post" for part in result.parts):
+        turned = any("disc" in part for part in result.parts)  # posts hold its ring
+        if report.passed and turned:
+            outcome["  of which on a turntable"] += 1
+        posted = any(part["kind"] == "post" for part in result.parts)
+        if report.passed and posted and not (framed or turned):
             outcome["  of which on a bracket"] += 1
         if report.passed and any(pin["name"].endswith("_top") for pin in pins):
             outcome["  of which on ground stubs"] += 1  # a pin and a stub at one joint
@@ -263,7 +267,8 @@ def export(args: argparse.Namespace) -> int:
                  "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
-                 "    several parts at once", "  of which on ground stubs",
+                 "    several parts at once", "  of which on a turntable",
+                 "  of which on ground stubs",
                  "  of which with a finer step", "failed verification",
                  "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
