@@ -10,9 +10,8 @@ stacked a module between two frame plates, `framed`, and otherwise a link or two
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
 or several do, `forked`, and last the crank turns on a turntable, `turntable`), plates become
-STL meshes (`meshes`, outlined by `plates`) and the
-bodies, hinges, pins, loop closures and crank servo become `mechanism.xml` with a `scene.xml`
-around it (`mjcf`).
+STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop closures and
+crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations
