@@ -103,3 +103,13 @@ def test_three_couplers_on_the_crank_tip_are_built_on_a_turntable(tmp_path):
     names = {p["name"]: p for p in result.parts}
     assert "disc" in names["plate_0_1_4"] and "bore" in names["ground_ring"]
     assert not [p for p in result.parts if p["kind"] == "pin" and p["joints"] == [0]]
+
+
+def test_export_says_the_crank_is_on_a_turntable(tmp_path, capsys):
+    """The builder must know: no shaft at the motor's pivot, the motor drives the disc's rim."""
+    from linkd.cli import main
+
+    path = tmp_path / "snarled.json"
+    SNARLED.save(path)
+    assert main(["export", str(path), "--out", str(tmp_path / "out"), "--export", "mjcf"]) == 0
+    assert "the crank (plate_0_1_4) on a turntable: drive it at its rim" in capsys.readouterr().out

@@ -189,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
     m = d.measures
     narrowed = d.export.narrowed
     narrower = f" (links {narrowed:.2g} of the usual width)" if narrowed < 1 else ""
+    if any("disc" in part for part in d.export.parts):
+        narrower += ", the crank on a turntable (drive it at its rim)"
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers{narrower}, verified in MuJoCo")  # fmt: skip
     chosen = " (chosen by --path auto)" if args.path == "auto" else ""
