@@ -83,6 +83,11 @@ class ExportResult:
     minimal: bool = True  # the layer count is proved minimal
     narrowed: float = 1.0  # link width over the usual one: below 1 where no wider one layered
 
+    @property
+    def turntable(self) -> str | None:
+        """The crank's name where it is a disc on a turntable (to be driven at its rim)."""
+        return next((part["name"] for part in self.parts if "disc" in part), None)
+
 
 def export_mechanism(
     mech: Mechanism,

@@ -251,7 +251,7 @@ def export(args: argparse.Namespace) -> int:
                 arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
         if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
-        turned = any("disc" in part for part in result.parts)  # posts hold its ring
+        turned = result.turntable is not None  # posts hold its ring
         if report.passed and turned:
             outcome["  of which on a turntable"] += 1
         posted = any(part["kind"] == "post" for part in result.parts)

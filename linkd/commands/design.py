@@ -189,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
     m = d.measures
     narrowed = d.export.narrowed
     narrower = f" (links {narrowed:.2g} of the usual width)" if narrowed < 1 else ""
-    if any("disc" in part for part in d.export.parts):
+    if d.export.turntable:
         narrower += ", the crank on a turntable (drive it at its rim)"
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers{narrower}, verified in MuJoCo")  # fmt: skip

@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     width = result.sizes["link_width"]
     narrower = (f"; links {width:.3g} {mech.units} wide, {result.narrowed:.2g} of the usual width "
                 "(no wider layering found)") if result.narrowed < 1 else ""  # fmt: skip
-    disc = next((part["name"] for part in result.parts if "disc" in part), None)
+    disc = result.turntable
     turned = f"; the crank ({disc}) on a turntable: drive it at its rim" if disc else ""
     print(f"{out}: {result.layers} layers; parts: {kinds}{narrower}{turned}; "
           f"exported in {result.seconds:.2f} s")  # fmt: skip
