@@ -12,18 +12,19 @@ from linkd.cli import main
 from linkd.export import TIMESTEP, export_mechanism, set_timestep
 from linkd.geometry import Similarity
 from linkd.mechanism import Mechanism
-from linkd.verified import export_verified
+from linkd.verified import FINEST, export_verified
 from linkd.verify import verify_output
 from linkd.verify.checks import DYNAMIC_PATH_RTOL
 
 
-def near_toggle_four_bar() -> Mechanism:
-    """Crank 1, coupler 3.00005, rocker 2, ground 4 (x 25 mm): crank + ground exceed coupler +
-    rocker by 5e-5, so the coupler and rocker almost fold flat once a turn. At 0.25 ms its
-    end effector leaves the analytic path by about 8 times the dynamics check's tolerance."""
+def near_toggle_four_bar(margin: float = 5e-5) -> Mechanism:
+    """Crank 1, coupler 3 + margin, rocker 2, ground 4 (x 25 mm): crank + ground exceed
+    coupler + rocker by the margin, so the coupler and rocker almost fold flat once a turn. At
+    0.25 ms and a margin of 5e-5 its end effector leaves the analytic path by about 8 times the
+    dynamics check's tolerance."""
     o, g = np.array([0.0, 0.0]), np.array([4.0, 0.0])
     m = np.array([0.0, 1.0])
-    c = place(m, g, 3.00005, 2.0, -1)
+    c = place(m, g, 3.0 + margin, 2.0, -1)
     p = place(m, c, 2.1, 1.8, 1)
     links = [(0, 1), (1, 3), (2, 3), (1, 4), (3, 4)]
     return Mechanism(np.array([o, m, g, c, p]) * 25, [1, 0, 1, 0, 0], links, (0, 1), 4)
@@ -54,3 +55,13 @@ def test_a_model_that_passes_keeps_the_default_step_and_file(tmp_path):
     assert (verified / "mechanism.xml").read_text() != (plain / "mechanism.xml").read_text()
     set_timestep(plain, TIMESTEP)
     assert (verified / "mechanism.xml").read_text() == (plain / "mechanism.xml").read_text()
+
+
+def test_a_model_no_step_can_save_is_not_run_again(tmp_path):
+    said = []
+    _, report = export_verified(near_toggle_four_bar(5e-6), tmp_path, {"mjcf"}, progress=said.append)
+    assert report.failed == ["dynamics"]
+    assert report.check("dynamics").figures["timestep_s"] == TIMESTEP
+    assert not any("again" in text for text in said)
+    set_timestep(tmp_path, FINEST)  # and indeed the finest step would not have saved it
+    assert verify_output(tmp_path, write=False).failed == ["dynamics"]

@@ -211,7 +211,7 @@ def export(args: argparse.Namespace) -> int:
         mechanisms = {f"no. {n}": from_graph(graph, Similarity(scale=args.size))
                       for n, graph in enumerate(graphs)}  # fmt: skip
     outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
-    refused_ones = []  # which were refused: their names in the run (to rebuild them)
+    refused_ones, failed_ones = [], []  # their names in the run (to rebuild them)
     for name, mech in mechanisms.items():
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
         with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
@@ -262,6 +262,8 @@ def export(args: argparse.Namespace) -> int:
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
+        if not report.passed:
+            failed_ones.append(f"{name} ({', '.join(report.failed)})")
     print(f"export: {len(mechanisms)} {what}")
     for name in ("verified", "  of which between frames",
                  "  of which with narrower links", "  of which with bent links",
@@ -275,6 +277,7 @@ def export(args: argparse.Namespace) -> int:
             print(f"  {name:28s} {outcome[name]}")
     if failed:
         print("  failed checks                " + ", ".join(f"{k} {v}" for k, v in failed.items()))
+        print(f"  the failed ones              {', '.join(failed_ones)}")
     if seconds:
         print(f"  layers                       {min(layers)}..{max(layers)}, "
               f"mean {np.mean(layers):.1f}, median {np.median(layers):g}")  # fmt: skip
