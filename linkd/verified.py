@@ -6,9 +6,9 @@ step. A mechanism close to a toggle pose can miss those tolerances at the defaul
 model is then written again with the step that this square law says brings both under their
 tolerances (a power-of-two fraction of the default, FINEST at most) and verified again, halving
 further while it still falls short. Where that law says even FINEST would fall short by more
-than HOPELESS, the model is not run again: the check fails as it stands. The step in mechanism.xml is the one verified last, so
-`linkd verify` on the folder checks exactly that model. A model that passes at the default step
-is written and verified once, as before.
+than HOPELESS, the model is not run again: the check fails as it stands. The step in
+mechanism.xml is the one verified last, so `linkd verify` on the folder checks exactly that
+model. A model that passes at the default step is written and verified once, as before.
 """
 
 from __future__ import annotations

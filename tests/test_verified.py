@@ -58,8 +58,9 @@ def test_a_model_that_passes_keeps_the_default_step_and_file(tmp_path):
 
 
 def test_a_model_no_step_can_save_is_not_run_again(tmp_path):
-    said = []
-    _, report = export_verified(near_toggle_four_bar(5e-6), tmp_path, {"mjcf"}, progress=said.append)
+    said: list[str] = []
+    mech = near_toggle_four_bar(5e-6)
+    _, report = export_verified(mech, tmp_path, {"mjcf"}, progress=said.append)
     assert report.failed == ["dynamics"]
     assert report.check("dynamics").figures["timestep_s"] == TIMESTEP
     assert not any("again" in text for text in said)
