@@ -9,7 +9,8 @@ pins, `routing`; where bent ones cannot either, a mechanism made of modules on o
 stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
-or several do, `forked`, and last the crank turns on a turntable, `turntable`), plates become
+or several do, `forked`, and last the parts at the motor's pivot turn on turntables,
+`turntable`), plates become
 STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop closures and
 crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
@@ -60,7 +61,7 @@ FORMATS = frozenset({"mjcf", "stl"})
 CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  framed_layers: "modules between frames", strapped_layers: "eccentric straps",
                  braced_layers: "split plates and brackets", forked_layers: "forked parts",
-                 turntable_layers: "the crank on a turntable"}  # fmt: skip
+                 turntable_layers: "turntables at the motor's pivot"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -82,11 +83,18 @@ class ExportResult:
     min_gap: float = float("inf")  # least in-plane gap between plates of one layer, mech units
     minimal: bool = True  # the layer count is proved minimal
     narrowed: float = 1.0  # link width over the usual one: below 1 where no wider one layered
+    crank: str = ""  # the crank's part name
+    turntables: tuple[str, ...] = ()  # the parts at the motor's pivot on turntables
 
     @property
     def turntable(self) -> str | None:
         """The crank's name where it is a disc on a turntable (to be driven at its rim)."""
-        return next((part["name"] for part in self.parts if "disc" in part), None)
+        return self.crank if self.crank in self.turntables else None
+
+    @property
+    def rings(self) -> tuple[str, ...]:
+        """The other parts at the motor's pivot that turn in rings of their own."""
+        return tuple(name for name in self.turntables if name != self.crank)
 
 
 def export_mechanism(
@@ -132,8 +140,11 @@ def export_mechanism(
         out_dir / "mechanism.json"
     )
     files.append(Path("mechanism.json"))
+    names = [part.name for part in assembly.parts]
     return ExportResult(layout.count, parts, sorted(files), time.perf_counter() - start,
-                        sizes.to_dict(), layout.min_gap, layout.minimal, narrowed)  # fmt: skip
+                        sizes.to_dict(), layout.min_gap, layout.minimal, narrowed,
+                        names[assembly.crank.child],
+                        tuple(names[table.part] for table in layout.turntables))  # fmt: skip
 
 
 def _layered(
@@ -151,8 +162,8 @@ def _layered(
     first QUICK_STRAPS strap choices, at the frames' width or wider, may still do with fewer
     layers), then parts turn on sheaves as eccentric straps (`strapped`), and then plates are
     cut into arms and ground pins are held by brackets or as stubs from both plates
-    (`braced`, unless `options.brackets` is off), then a part forks, then the crank turns on a
-    turntable (`turntable`); those three are SCREENED.
+    (`braced`, unless `options.brackets` is off), then a part forks, then the parts at the
+    motor's pivot turn on turntables (`turntable`); those three are SCREENED.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -220,7 +231,7 @@ def _layered(
         if why:
             culprits = f"; with straight parts, {why} alone cannot all be kept clear"
     frames = ", framed" if framed_layers in layerings else ""
-    turned = ", a turntable" if turntable_layers in layerings else ""
+    turned = ", turntables" if turntable_layers in layerings else ""
     tried = f"straight, bent{frames}, strapped, split and forked parts{turned}{widths} tried"
     tried += culprits
     raise ValueError(f"{first} ({tried})")
@@ -232,7 +243,7 @@ def _write_meshes(
     """One STL per plate in its body's frame, metres, and for a bent link also one per bar (its
     convex pieces, which the model collides). Returns the model's mesh name -> relative path,
     plate name -> relative path of its whole STL, and the model's mesh name -> volume (m^3)."""
-    from .meshes import bent_mesh, disc_mesh, plate_mesh, strap_meshes, write_stl
+    from .meshes import bent_mesh, disc_mesh, plate_mesh, ring_meshes, strap_meshes, write_stl
 
     unit = UNITS_IN_METRES[mech.units]
     origins = part_origins(mech, assembly)
@@ -246,13 +257,16 @@ def _write_meshes(
             sheave = disc_mesh(points, plate.sheave * unit, *size[1:], True)
             write_stl(out_dir / whole[plate.name], sheave, plate.name)
             continue
-        if plate.disc:  # a turntable's: a plate like any other, whose hull is the disc
+        if plate.disc and not plate.bore:  # a turntable's: a plate whose hull is the disc
             solid = disc_mesh(points, plate.disc * unit, *size[1:], False)
             write_stl(out_dir / whole[plate.name], solid, plate.name)
             model[plate.name], volumes[plate.name] = whole[plate.name], solid.volume
             continue
-        if plate.bore:
-            solid, pieces = strap_meshes(points, plate.bore * unit, *size, hull=plate.part > 0)
+        if plate.bore:  # a strap, a turntable's ring, or the ground's ring round one
+            if plate.disc:
+                solid, pieces = ring_meshes(points, plate.bore * unit, plate.disc * unit, *size[1:])
+            else:
+                solid, pieces = strap_meshes(points, plate.bore * unit, *size, hull=plate.part > 0)
             write_stl(out_dir / whole[plate.name], solid, plate.name)
             for k, piece in enumerate(pieces):
                 name = f"{plate.name}_piece{k}"

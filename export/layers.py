@@ -98,15 +98,17 @@ class Strap:
 
 @dataclass(frozen=True)
 class Turntable:
-    """The crank made a disc of `radius` round the motor's pivot `joint` (`turntable`), with no
-    pin there: it turns in the bore of a ground ring on its layer, held by `posts` from the base."""
+    """A part at the motor's pivot `joint` made a disc of `radius` round it (`turntable`), or a
+    ring where it has a `hole`, with no pin there: it turns in the bore of a ground ring on its
+    layer, held by `posts` from the base."""
 
     part: int
     joint: int
     layer: int
-    radius: float  # mechanism units, as the bore's
+    radius: float  # mechanism units, as the bore's and the hole's
     bore: float
     posts: tuple[tuple[float, float], ...]
+    hole: float = 0.0  # a ring's: the radius of its hole, which pins may pass
 
 
 @dataclass(frozen=True)
@@ -126,7 +128,7 @@ class Layout:
     straps: tuple[Strap, ...] = ()  # parts that turn on sheaves (`strapped`)
     frames: tuple[int, ...] = ()  # layers of ground plates between modules (`framed`)
     frame_posts: tuple[tuple[float, float], ...] = ()  # posts holding them, base to cover
-    turntable: Turntable | None = None  # the crank on a turntable (`turntable`)
+    turntables: tuple[Turntable, ...] = ()  # parts at the motor's pivot on turntables
 
 
 @dataclass(frozen=True)

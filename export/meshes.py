@@ -72,12 +72,8 @@ def strap_meshes(
 
     centre, others = points[0], points[1:]
     outer = bore + width / 2
-    sides = int(np.clip(np.ceil(np.pi * np.sqrt(outer / (0.04 * width))), 16, 128))
-    angles = np.arange(sides + 1) * (2 * np.pi / sides)
-    rim = np.stack([np.cos(angles), np.sin(angles)], -1) / np.cos(np.pi / sides)
-    inner, rims = centre + bore * rim, centre + outer * rim
-    quads = [[inner[k], rims[k], rims[k + 1], inner[k + 1]] for k in range(sides)]  # anticlockwise
-    pieces = [manifold3d.CrossSection([np.array(quad).tolist()]) for quad in quads]
+    pieces = _ring_pieces(centre, bore, outer, width)
+    sides = len(pieces)
     ends = centre + outer * (others - centre) / np.linalg.norm(others - centre, axis=1)[:, None]
     pieces += [manifold3d.CrossSection.batch_hull(_discs(np.stack(pair), width / 2))
                for pair in zip(ends, others)]  # fmt: skip
@@ -89,6 +85,40 @@ def strap_meshes(
     return _solid(outline, others, hole_diameter, thickness), [
         _solid(piece, others, hole_diameter, thickness) for piece in pieces
     ]
+
+
+def ring_meshes(
+    points: np.ndarray, hole: float, radius: float, hole_diameter: float, thickness: float
+) -> tuple[Solid, list[Solid]]:
+    """A turntable's ring (`turntable`): a disc of `radius` round points[0] with a hole of
+    radius `hole`, and a pin hole at every other point. Returns the whole plate and its convex
+    pieces for MuJoCo: quadrilaterals whose inner sides touch the hole and whose outer corners
+    lie on the rim."""
+    import manifold3d
+
+    centre, others = points[0], points[1:]
+    pieces = _ring_pieces(centre, hole, radius, radius - hole, inscribed=True)
+    disc = manifold3d.CrossSection.circle(radius, 4 * SEGMENTS).translate(tuple(centre))
+    outline = disc - manifold3d.CrossSection.circle(hole, 4 * SEGMENTS).translate(tuple(centre))
+    solid = _solid(outline, others, hole_diameter, thickness)
+    return solid, [_solid(piece, others, hole_diameter, thickness) for piece in pieces]
+
+
+def _ring_pieces(
+    centre: np.ndarray, inner: float, outer: float, width: float, inscribed: bool = False
+) -> list:
+    """A ring from radius `inner` to `outer` as convex quadrilaterals, the more the larger the
+    ring is against `width`: their inner sides touch the inner circle, and their outer sides
+    touch the outer one, or where `inscribed` their outer corners lie on it."""
+    import manifold3d
+
+    sides = int(np.clip(np.ceil(np.pi * np.sqrt(outer / (0.04 * width))), 16, 128))
+    angles = np.arange(sides + 1) * (2 * np.pi / sides)
+    unit = np.stack([np.cos(angles), np.sin(angles)], -1)
+    rim = unit / np.cos(np.pi / sides)
+    inside, rims = centre + inner * rim, centre + outer * (unit if inscribed else rim)
+    quads = [[inside[k], rims[k], rims[k + 1], inside[k + 1]] for k in range(sides)]  # ccw
+    return [manifold3d.CrossSection([np.array(quad).tolist()]) for quad in quads]
 
 
 def disc_mesh(

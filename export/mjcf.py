@@ -143,7 +143,7 @@ class _Builder:
                           size=_fmt(plate.sheave * self.unit, self.thickness / 2),
                           pos=_fmt(0, 0, z + self.thickness / 2))  # fmt: skip
             return
-        if plate.disc and plate.name not in meshes:  # a turntable's disc, as a cylinder
+        if plate.disc and not plate.bore and plate.name not in meshes:  # a turntable's disc
             ET.SubElement(body, "geom", name=plate.name, type="cylinder", rgba=colour,
                           size=_fmt(plate.disc * self.unit, self.thickness / 2),
                           pos=_fmt(*points[0], z + self.thickness / 2))  # fmt: skip
@@ -187,16 +187,22 @@ class _Builder:
     def strap(self, plate: Plate, points: np.ndarray, z: float, colour: str) -> None:
         """A strap without meshes: its ring as boxes whose inner faces touch the bore, a bar
         and a boss out to each other joint, and the sides of their hull but for a turntable's
-        ring (`meshes.strap_meshes` for the shape)."""
+        ring (`meshes.strap_meshes` for the shape); a turntable's ring is its boxes alone, out
+        to inside its rim (`meshes.ring_meshes`)."""
         centre, bore, zc = points[0], plate.bore * self.unit, z + self.thickness / 2
         sides = 64
-        middle, half = bore + self.width / 4, (bore + self.width / 2) * np.tan(np.pi / sides)
+        outer = bore + self.width / 2
+        if plate.disc:  # the boxes' outer corners on the rim
+            outer = plate.disc * self.unit * np.cos(np.pi / sides)
+        middle, half = (bore + outer) / 2, outer * np.tan(np.pi / sides)
         for k in range(sides):
             angle = (k + 0.5) * 2 * np.pi / sides
             out = np.array([np.cos(angle), np.sin(angle)])
             along = np.array([-out[1], out[0]]) * half
             chord = (centre + middle * out - along, centre + middle * out + along)
-            self.box(plate.part, f"{plate.name}_ring{k}", chord, self.width / 2, zc, colour)
+            self.box(plate.part, f"{plate.name}_ring{k}", chord, outer - bore, zc, colour)
+        if plate.disc:
+            return
         for k, point in enumerate(points[1:]):
             out = (point - centre) / np.linalg.norm(point - centre)
             bar = (centre + (bore + self.width / 2) * out, point)

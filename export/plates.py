@@ -1,7 +1,7 @@
 """The solid plates of a layered assembly: what is cut, meshed and modelled, part by part.
 
 The ground is a base plate under the stack, maybe a cover over it, brackets inside it, frames
-between modules and a turntable's ring; each moving part is one plate (a disc on a
+between modules and turntables' rings; each moving part is one plate (a disc or a ring on a
 turntable), or one per arm where it is split, and a strap's part has a sheave besides.
 """
 
@@ -28,9 +28,10 @@ class Plate:
     layer: int
     bends: tuple[tuple[float, float], ...] = ()  # waypoints of a bent link, between its joints
     posts: tuple[tuple[float, float], ...] = ()  # ground posts it holds (outline and holes)
-    bore: float = 0.0  # a strap: the radius of its bore round its first joint (`strapped`)
+    bore: float = 0.0  # a strap's or ring's: the radius of its bore round its first joint
     sheave: float = 0.0  # a sheave: a disc of this radius round its first joint
-    disc: float = 0.0  # a turntable: the plate is a disc of this radius round its first joint
+    disc: float = 0.0  # a turntable's: a disc of this radius round its first joint (with a bore:
+    # a ring)
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
@@ -42,9 +43,9 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     base = tuple(j for j in ground.joints if j not in layout.top_joints and j not in held)
     stubs = (assembly.pins[k].joint for k in layout.cover_stubs)
     cover = tuple(sorted({*layout.top_joints, *stubs}))
-    table = layout.turntable
+    tables = layout.turntables
     low = tuple(b.post for b in layout.brackets if not b.top) + layout.frame_posts
-    low += table.posts if table else ()
+    low += tables[0].posts if tables else ()  # the turntables share their posts
     high = tuple(b.post for b in layout.brackets if b.top) + layout.frame_posts
     if layout.frames:  # each ground plate holds the rods that end in it or pass it
         ends = [(rod.joint, rod.span) for rod in pin_rods(assembly, layout) if 0 in rod.members]
@@ -57,9 +58,9 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     for k, layer in enumerate(layout.frames):
         out.append(Plate(f"{ground.name}_frame{k}", 0, _held(ends, layer), layer,
                          posts=layout.frame_posts))  # fmt: skip
-    if table:  # the turntable's ring: a strap round the disc, with a bar out to each post
-        out.append(Plate(f"{ground.name}_ring", 0, (table.joint,), table.layer, posts=table.posts,
-                         bore=table.bore))  # fmt: skip
+    for k, table in enumerate(tables):  # a ring round each, with a bar out to each post
+        out.append(Plate(f"{ground.name}_ring{k or ''}", 0, (table.joint,), table.layer,
+                         posts=table.posts, bore=table.bore))  # fmt: skip
     straps = {strap.part: strap for strap in layout.straps}
     for strap in layout.straps:
         through = (assembly.pins[k].joint for k in strap.passing)
@@ -71,9 +72,11 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
             joints = (joint, *(j for j in part.joints if j != joint))
             out.append(Plate(part.name, p, joints, int(layout.layers[p]), bore=straps[p].radius))
             continue
-        if table and p == table.part:
+        table = next((table for table in tables if table.part == p), None)
+        if table:
             joints = (table.joint, *(j for j in part.joints if j != table.joint))
-            out.append(Plate(part.name, p, joints, table.layer, disc=table.radius))
+            out.append(Plate(part.name, p, joints, table.layer, bore=table.hole,
+                             disc=table.radius))  # fmt: skip
             continue
         for k, arm in enumerate(layout.arms.get(p, ())):
             out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
@@ -100,10 +103,11 @@ def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:
 
 def posts(layout: Layout) -> list[tuple[tuple[float, float], tuple[int, int]]]:
     """Each ground post's axis and (lowest, highest) layer: a bracket's from the base or down
-    from the cover, a turntable ring's from the base, then the frames' from the base to the
-    cover."""
+    from the cover, the turntables' rings' from the base to the highest ring, then the frames'
+    from the base to the cover."""
     top = layout.count - 1
     out = [(b.post, (b.layer, top) if b.top else (0, b.layer)) for b in layout.brackets]
-    table = layout.turntable
-    out += [(point, (0, table.layer)) for point in (table.posts if table else ())]
+    tables = layout.turntables
+    top_ring = max((table.layer for table in tables), default=0)
+    out += [(point, (0, top_ring)) for point in (tables[0].posts if tables else ())]
     return out + [(point, (0, top)) for point in layout.frame_posts]

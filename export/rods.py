@@ -31,15 +31,17 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
     stub (`<name>_top`) hanging from the cover, each through the parts within its span. A pin
     where a part forks (`forks`) is coaxial rods fixed in the forked part, `<name>a`,
     `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20). A
-    turntable's disc is on no pin at the motor's pivot: that pin is only there where other parts
-    turn on it."""
+    part on a turntable is on no pin at the motor's pivot: that pin is only there where other
+    parts turn on it."""
     rods = []
-    table = layout.turntable
+    tabled = {table.part for table in layout.turntables}
+    pivot = layout.turntables[0].joint if tabled else None
     for k, pin in enumerate(assembly.pins):
-        if table and pin.joint == table.joint:  # the turntable's disc turns in its ring instead
-            pin = replace(pin, members=tuple(m for m in pin.members if m != table.part))
-            if not any(pin.members):
+        if pin.joint == pivot:  # the turntables' parts turn in their rings instead
+            members = tuple(m for m in pin.members if m not in tabled)
+            if not any(members):
                 continue
+            pin = replace(pin, hub=pin.hub if pin.hub in members else members[0], members=members)
         if k in layout.forks:
             fork = layout.forks[k]
             for letter, (parts, span) in zip(ascii_lowercase, fork.rods):

@@ -1,4 +1,5 @@
-"""The crank on a turntable: a disc that turns in a ring, with no pin at the motor's pivot.
+"""Parts at the motor's pivot on turntables: discs or rings that turn in ground rings, with no
+pin at the pivot.
 
 In a few mechanisms no construction holds the motor's pivot: the parts that pass over it lie
 on both sides of the crank in every order the other pins allow, so the motor's shaft, from
@@ -10,9 +11,15 @@ own pins may cross that layer, so the disc splits the stack: what lies below it 
 above meet only at the crank's pins. Other parts at the motor's pivot keep their pin, as a stub
 from the base or the cover that stops short of the disc.
 
-The search is the forks' (`forked.fork_search`: whole parts first, then forks, none at the
-crank), on the split plates' candidates with the crank taken off the motor's pin and made the
-disc: it has its layer to itself, and every pin but its own keeps off that layer.
+Where that does not layer, the other parts at the pivot go on turntables too, each a ring
+(a disc with a hole, as far in as its nearest joint allows) in a ground ring of its own, on
+the same posts: first round the crank's shaft, then with the crank a disc as well. A pin whose
+path stays inside a ring's hole may cross its layer: the motor's shaft, the crank's pins.
+
+The search is the forks' (`forked.fork_search`: whole parts first, then forks, none of a part
+on a turntable; a bracket only for the rings), on the split plates' candidates with those
+parts taken off the motor's pin: each has its layer to itself, and every pin but its own, and
+those inside its hole, keeps off that layer.
 """
 
 from __future__ import annotations
@@ -24,20 +31,39 @@ import numpy as np
 from .braced import swept_candidates
 from .forked import drivable, fork_search
 from .framed import posts_beyond
-from .layers import Conflicts, Layout, NoFlatLayers, Turntable, stack_layers
+from .layers import Conflicts, Layout, NoFlatLayers, Turntable, largest_step, stack_layers
 from .options import Sizes
 from .parts import Assembly
 
 
 def turntable_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with the crank a disc turning in a ground ring (NoFlatLayers where none
-    layers): whole parts first, then forked ones."""
+    """Layers with parts at the motor's pivot on turntables (NoFlatLayers where none layers):
+    the crank alone, then the others round its shaft, then all of them."""
+    crank, motor = assembly.crank.child, assembly.crank.joint
+    pivot = next(pin for pin in assembly.pins if pin.joint == motor)
+    others = {m for m in pivot.members if m and m != crank}
+    tries = [({crank}, False)] + ([(others, True), ({crank, *others}, True)] if others else [])
+    for taken, brackets in tries:
+        try:
+            return _on_turntables(assembly, paths, sizes, taken, brackets)
+        except NoFlatLayers as exc:
+            refusal = exc
+    raise refusal
+
+
+def _on_turntables(
+    assembly: Assembly, paths: np.ndarray, sizes: Sizes, taken: set[int], brackets: bool
+) -> Layout:
+    """Layers with the parts `taken` on turntables, whole parts first, then forked ones (with
+    one ground pin on a bracket where `brackets`)."""
     crank, motor = assembly.crank.child, assembly.crank.joint
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
-    searched = _off_pivot(assembly, crank, motor, {crank})
-    arms = {u for u, role in enumerate(roles) if role[0] == "arm" and role[1] == crank}
-    union = _off_pivot(union, crank, motor, {crank, *arms})
-    conflicts = _on_own_layer(union, conflicts, crank)
+    searched = _off_pivot(assembly, motor, taken)
+    arms = {u: role[1] for u, role in enumerate(roles) if role[0] == "arm" and role[1] in taken}
+    union = _off_pivot(union, motor, taken, set(arms))
+    holes = {p: 0.0 if p == crank else _hole(assembly, paths, sizes, p) for p in taken}
+    inside = {p: _inside(paths, motor, sizes, hole) for p, hole in holes.items()}
+    conflicts = _on_own_layers(union, conflicts, {p: inside[p] for p in taken})
     real = len(assembly.parts)
     whole = replace(conflicts, parts=conflicts.parts[:real, :real],
                     distance=conflicts.distance[:real, :real],
@@ -47,36 +73,67 @@ def turntable_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Lay
         layout = stack_layers(searched, whole, sizes, stubs=True)
     except NoFlatLayers:
         layout = fork_search(searched, (union, roles, posts, conflicts), len(paths), sizes,
-                             lambda a, fork: fork[0] != crank and drivable(a, fork),
-                             brackets=False)  # fmt: skip
-    positions = paths[list(assembly.parts[crank].joints), 0] - paths[motor, 0]
-    radius = float(np.linalg.norm(positions, axis=1).max()) + sizes.link_width / 2
-    table = Turntable(crank, motor, int(layout.layers[crank]), radius,
-                      radius + sizes.clearance, posts_beyond(paths, motor, sizes))  # fmt: skip
-    return replace(layout, turntable=table)
+                             lambda a, fork: fork[0] not in taken and drivable(a, fork),
+                             brackets=brackets)  # fmt: skip
+    ring_posts = posts_beyond(paths, motor, sizes)
+    tables = []
+    for p in sorted(taken):
+        positions = paths[list(assembly.parts[p].joints), 0] - paths[motor, 0]
+        radius = float(np.linalg.norm(positions, axis=1).max()) + sizes.link_width / 2
+        tables.append(Turntable(p, motor, int(layout.layers[p]), radius,
+                                radius + sizes.clearance, ring_posts, holes[p]))  # fmt: skip
+    return replace(layout, turntables=tuple(tables))
 
 
-def _off_pivot(assembly: Assembly, crank: int, motor: int, taken: set[int]) -> Assembly:
-    """The assembly as searched: the crank (and its candidates `taken`) off the pin at the
-    motor's pivot and without that joint (a pin left to the ground alone holds nothing)."""
+def _hole(assembly: Assembly, paths: np.ndarray, sizes: Sizes, part: int) -> float:
+    """The radius of a ring's hole: half a width inside its nearest joint (0: a disc, where
+    that leaves no room for a pin)."""
+    motor = assembly.crank.joint
+    joints = [j for j in assembly.parts[part].joints if j != motor]
+    hole = float(np.linalg.norm(paths[joints, 0] - paths[motor, 0], axis=1).min())
+    hole -= sizes.link_width / 2
+    return hole if hole > sizes.hole_diameter + 2 * sizes.clearance else 0.0
+
+
+def _inside(paths: np.ndarray, motor: int, sizes: Sizes, hole: float) -> set[int]:
+    """The joints whose pins stay inside a hole of that radius over the sweep, clear of its
+    edge (the sweep's largest step to spare, as in `layers.find_conflicts`)."""
+    if not hole:
+        return set()
+    reach = sizes.hole_diameter / 2 + sizes.clearance + largest_step(paths)
+    far = np.linalg.norm(paths - paths[motor, :1], axis=-1).max(1)
+    return set(np.flatnonzero(far < hole - reach).tolist())
+
+
+def _off_pivot(
+    assembly: Assembly, motor: int, taken: set[int], arms: set[int] = frozenset()
+) -> Assembly:
+    """The assembly as searched: the parts `taken` off the pin at the motor's pivot and without
+    that joint (a pin left to the ground alone holds nothing), and their candidate `arms` off
+    the pin too."""
     parts = list(assembly.parts)
-    parts[crank] = replace(parts[crank], joints=tuple(j for j in parts[crank].joints if j != motor))
+    for p in taken:
+        parts[p] = replace(parts[p], joints=tuple(j for j in parts[p].joints if j != motor))
     pins = []
     for pin in assembly.pins:
         if pin.joint == motor and not pin.name.startswith("post"):
-            members = tuple(m for m in pin.members if m not in taken)
+            members = tuple(m for m in pin.members if m not in taken | arms)
             pin = replace(pin, hub=members[0], members=members)
         pins.append(pin)
     return replace(assembly, parts=parts, pins=pins)
 
 
-def _on_own_layer(union: Assembly, conflicts: Conflicts, crank: int) -> Conflicts:
-    """The conflicts with the crank a disc in a ring that fills its layer: no other part shares
-    it, and every pin but the crank's own (and the ground's posts) keeps off it."""
+def _on_own_layers(union: Assembly, conflicts: Conflicts, inside: dict[int, set[int]]) -> Conflicts:
+    """The conflicts with each part of `inside` on a turntable whose ring fills its layer: no
+    other part shares it, and every pin but its own, the ground's posts and the pins at the
+    joints `inside[part]` (within its hole) keeps off it."""
     near = conflicts.parts.copy()
-    near[crank, 1:] = near[1:, crank] = True
-    near[crank, crank] = False
-    blocked = [near_pin if crank in pin.members or pin.name.startswith("post")
-               or crank in near_pin else [*near_pin, crank]
-               for pin, near_pin in zip(union.pins, conflicts.blocked)]  # fmt: skip
+    blocked = [list(near_pin) for near_pin in conflicts.blocked]
+    for part, passing in inside.items():
+        near[part, 1:] = near[1:, part] = True
+        near[part, part] = False
+        for pin, near_pin in zip(union.pins, blocked):
+            free = part in pin.members or pin.name.startswith("post") or pin.joint in passing
+            if not free and part not in near_pin:
+                near_pin.append(part)
     return replace(conflicts, parts=near, blocked=blocked)

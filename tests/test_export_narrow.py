@@ -108,7 +108,7 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     plain = [f"layering {c} at {w}" for c in ("straight parts", "bent links", "eccentric straps")
              for w in widths]  # fmt: skip
     # the costly ones skip half the width where a quarter does not layer
-    costly = ("split plates and brackets", "forked parts", "the crank on a turntable")
+    costly = ("split plates and brackets", "forked parts", "turntables at the motor's pivot")
     screened = [f"layering {c} at {w}" for c in costly for w in widths[::2]]
     assert told == plain + screened + ["none layers: finding the pins that keep it from layering"]
     passed = []

@@ -251,9 +251,9 @@ def export(args: argparse.Namespace) -> int:
                 arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
         if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
-        turned = result.turntable is not None  # posts hold its ring
+        turned = bool(result.turntables)  # posts hold their rings
         if report.passed and turned:
-            outcome["  of which on a turntable"] += 1
+            outcome["  of which on turntables"] += 1
         posted = any(part["kind"] == "post" for part in result.parts)
         if report.passed and posted and not (framed or turned):
             outcome["  of which on a bracket"] += 1
@@ -269,7 +269,7 @@ def export(args: argparse.Namespace) -> int:
                  "  of which with narrower links", "  of which with bent links",
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
-                 "    several parts at once", "  of which on a turntable",
+                 "    several parts at once", "  of which on turntables",
                  "  of which on ground stubs",
                  "  of which with a finer step", "failed verification",
                  "refused (no flat layering)"):  # fmt: skip

@@ -191,6 +191,8 @@ def run(args: argparse.Namespace) -> int:
     narrower = f" (links {narrowed:.2g} of the usual width)" if narrowed < 1 else ""
     if d.export.turntable:
         narrower += ", the crank on a turntable (drive it at its rim)"
+    if d.export.rings:
+        narrower += f", {len(d.export.rings)} more parts on turntables round the motor's pivot"
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "
           f"{d.export.layers} layers{narrower}, verified in MuJoCo")  # fmt: skip
     chosen = " (chosen by --path auto)" if args.path == "auto" else ""

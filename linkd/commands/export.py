@@ -122,6 +122,8 @@ def run(args: argparse.Namespace) -> int:
                 "(no wider layering found)") if result.narrowed < 1 else ""  # fmt: skip
     disc = result.turntable
     turned = f"; the crank ({disc}) on a turntable: drive it at its rim" if disc else ""
+    if result.rings:
+        turned += f"; {', '.join(result.rings)} on turntables round the motor's pivot"
     print(f"{out}: {result.layers} layers; parts: {kinds}{narrower}{turned}; "
           f"exported in {result.seconds:.2f} s")  # fmt: skip
     if verification:
