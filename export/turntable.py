@@ -11,10 +11,11 @@ own pins may cross that layer, so the disc splits the stack: what lies below it 
 above meet only at the crank's pins. Other parts at the motor's pivot keep their pin, as a stub
 from the base or the cover that stops short of the disc.
 
-Where that does not layer, the other parts at the pivot go on turntables too, each a ring
+Where that does not layer, the other parts at the pivot go on turntables instead, each a ring
 (a disc with a hole, as far in as its nearest joint allows) in a ground ring of its own, on
-the same posts: first round the crank's shaft, then with the crank a disc as well. A pin whose
-path stays inside a ring's hole may cross its layer: the motor's shaft, the crank's pins.
+shared posts, round the crank's shaft. A pin whose path stays inside a ring's hole may cross
+its layer, as the crank's shaft does. (With the crank a disc as well, the bounds built no more
+than this: docs/benchmarks.md.)
 
 The search is the forks' (`forked.fork_search`: whole parts first, then forks, none of a part
 on a turntable; a bracket only for the rings), on the split plates' candidates with those
@@ -38,17 +39,16 @@ from .parts import Assembly
 
 def turntable_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """Layers with parts at the motor's pivot on turntables (NoFlatLayers where none layers):
-    the crank alone, then the others round its shaft, then all of them."""
+    the crank alone, then the others round its shaft."""
     crank, motor = assembly.crank.child, assembly.crank.joint
     pivot = next(pin for pin in assembly.pins if pin.joint == motor)
     others = {m for m in pivot.members if m and m != crank}
-    tries = [({crank}, False)] + ([(others, True), ({crank, *others}, True)] if others else [])
-    for taken, brackets in tries:
-        try:
-            return _on_turntables(assembly, paths, sizes, taken, brackets)
-        except NoFlatLayers as exc:
-            refusal = exc
-    raise refusal
+    try:
+        return _on_turntables(assembly, paths, sizes, {crank}, brackets=False)
+    except NoFlatLayers:
+        if not others:
+            raise
+    return _on_turntables(assembly, paths, sizes, others, brackets=True)
 
 
 def _on_turntables(
