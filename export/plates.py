@@ -30,8 +30,7 @@ class Plate:
     posts: tuple[tuple[float, float], ...] = ()  # ground posts it holds (outline and holes)
     bore: float = 0.0  # a strap's or ring's: the radius of its bore round its first joint
     sheave: float = 0.0  # a sheave: a disc of this radius round its first joint
-    disc: float = 0.0  # a turntable's: a disc of this radius round its first joint (with a bore:
-    # a ring)
+    disc: float = 0.0  # a turntable's: a disc of this radius round its first joint (a ring: bored)
 
 
 def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
