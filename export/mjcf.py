@@ -185,15 +185,13 @@ class _Builder:
                           rgba=colour)  # fmt: skip
 
     def strap(self, plate: Plate, points: np.ndarray, z: float, colour: str) -> None:
-        """A strap without meshes: its ring as boxes whose inner faces touch the bore, a bar
-        and a boss out to each other joint, and the sides of their hull but for a turntable's
-        ring (`meshes.strap_meshes` for the shape); a turntable's ring is its boxes alone, out
-        to inside its rim (`meshes.ring_meshes`)."""
+        """A strap without meshes (`meshes.strap_meshes`): its ring as boxes whose inner faces
+        touch the bore, a bar and a boss out to each other joint, and their hull's sides but
+        for a ground ring's; a turntable's ring is the boxes alone, corners on its rim."""
         centre, bore, zc = points[0], plate.bore * self.unit, z + self.thickness / 2
         sides = 64
-        outer = bore + self.width / 2
-        if plate.disc:  # the boxes' outer corners on the rim
-            outer = plate.disc * self.unit * np.cos(np.pi / sides)
+        rim = plate.disc * self.unit * np.cos(np.pi / sides)  # a turntable ring's: corners on it
+        outer = rim if plate.disc else bore + self.width / 2
         middle, half = (bore + outer) / 2, outer * np.tan(np.pi / sides)
         for k in range(sides):
             angle = (k + 0.5) * 2 * np.pi / sides
