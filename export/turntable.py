@@ -59,11 +59,12 @@ def _on_turntables(
     crank, motor = assembly.crank.child, assembly.crank.joint
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     searched = _off_pivot(assembly, motor, taken)
-    arms = {u: role[1] for u, role in enumerate(roles) if role[0] == "arm" and role[1] in taken}
-    union = _off_pivot(union, motor, taken, set(arms))
-    holes = {p: 0.0 if p == crank else _hole(assembly, paths, sizes, p) for p in taken}
+    arms = {u for u, role in enumerate(roles) if role[0] == "arm" and role[1] in taken}
+    union = _off_pivot(union, motor, taken, arms)
+    radii = {p: _radii(assembly, paths, p) for p in taken}  # (nearest, farthest) joint
+    holes = {p: 0.0 if p == crank else _hole(radii[p][0], sizes) for p in taken}
     inside = {p: _inside(paths, motor, sizes, hole) for p, hole in holes.items()}
-    conflicts = _on_own_layers(union, conflicts, {p: inside[p] for p in taken})
+    conflicts = _on_own_layers(union, conflicts, inside)
     real = len(assembly.parts)
     whole = replace(conflicts, parts=conflicts.parts[:real, :real],
                     distance=conflicts.distance[:real, :real],
@@ -78,20 +79,25 @@ def _on_turntables(
     ring_posts = posts_beyond(paths, motor, sizes)
     tables = []
     for p in sorted(taken):
-        positions = paths[list(assembly.parts[p].joints), 0] - paths[motor, 0]
-        radius = float(np.linalg.norm(positions, axis=1).max()) + sizes.link_width / 2
+        radius = radii[p][1] + sizes.link_width / 2
         tables.append(Turntable(p, motor, int(layout.layers[p]), radius,
                                 radius + sizes.clearance, ring_posts, holes[p]))  # fmt: skip
     return replace(layout, turntables=tuple(tables))
 
 
-def _hole(assembly: Assembly, paths: np.ndarray, sizes: Sizes, part: int) -> float:
-    """The radius of a ring's hole: half a width inside its nearest joint (0: a disc, where
-    that leaves no room for a pin)."""
+def _radii(assembly: Assembly, paths: np.ndarray, part: int) -> tuple[float, float]:
+    """The distances of a part's nearest and farthest joints from the motor's pivot, which it
+    turns about (so they hold over the sweep)."""
     motor = assembly.crank.joint
     joints = [j for j in assembly.parts[part].joints if j != motor]
-    hole = float(np.linalg.norm(paths[joints, 0] - paths[motor, 0], axis=1).min())
-    hole -= sizes.link_width / 2
+    distance = np.linalg.norm(paths[joints, 0] - paths[motor, 0], axis=1)
+    return float(distance.min()), float(distance.max())
+
+
+def _hole(nearest: float, sizes: Sizes) -> float:
+    """The radius of a ring's hole: half a width inside its nearest joint (0: a disc, where
+    that leaves no room for a pin)."""
+    hole = nearest - sizes.link_width / 2
     return hole if hole > sizes.hole_diameter + 2 * sizes.clearance else 0.0
 
 
