@@ -123,17 +123,23 @@ class _Screen:
         self.below.append((p, q, unless))
 
     def _orders(self) -> None:
-        """The clauses of every `_below`, level by level: q at most l implies p at most l - 1."""
-        by_length: dict[int, list[tuple[int, int, tuple[int, ...]]]] = {}
-        for rule in self.below:
-            by_length.setdefault(len(rule[2]), []).append(rule)
-        for length, rules in by_length.items():
-            p, q = (np.array([rule[k] for rule in rules]) for k in (0, 1))
-            rows = np.empty((len(rules), LEVELS, length + 2), int)
-            rows[..., :length] = np.array([rule[2] for rule in rules]).reshape(-1, 1, length)
-            rows[..., length] = -self.upto[q, 1:]
-            rows[..., length + 1] = self.upto[p, :-1]
-            self.clauses += rows.reshape(-1, length + 2).tolist()
+        """The clauses of every `_below`: a literal per ordered pair of plates, "p lies below
+        q" (q at most l implies p at most l - 1, level by level), and each rule's clause that
+        it holds unless one of the rule's literals does. Rules share pairs, so this is a
+        fraction of the clauses of writing every rule level by level."""
+        pairs: dict[tuple[int, int], int] = {}
+        for p, q, unless in self.below:
+            if (p, q) not in pairs:
+                pairs[p, q] = next(self.fresh)
+            self.clauses.append([*unless, pairs[p, q]])
+        if not pairs:
+            return
+        p, q = np.array(list(pairs)).T
+        rows = np.empty((len(pairs), LEVELS, 3), int)
+        rows[..., 0] = -np.array(list(pairs.values())).reshape(-1, 1)
+        rows[..., 1] = -self.upto[q, 1:]
+        rows[..., 2] = self.upto[p, :-1]
+        self.clauses += rows.reshape(-1, 3).tolist()
 
     def _apart(self, plate: int, members: list[tuple[int, int]], *unless: int) -> None:
         """The plate below all the members (plate, literal that it is made) or above all."""
