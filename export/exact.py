@@ -14,7 +14,6 @@ base, open from the start), or before all of them (one hanging from the cover, n
 from __future__ import annotations
 
 from functools import lru_cache
-from itertools import combinations
 
 import numpy as np
 from pysat.solvers import Solver
@@ -24,11 +23,13 @@ SOLVER = "minisat22"  # small problems: the quickest to start and to answer
 
 def exact_order(n: int, rules: list[tuple]) -> list[int] | None:
     """A pin-safe order of n parts (bottom up) under the pins' `rules` (`stacking.PinState`),
-    or None: none exists."""
+    or None: none exists. A literal per pair says which comes first; the triples that make it
+    a total order are added only where a model breaks them (most never come up), until one
+    has no cycle of three, and so none at all (a tournament)."""
     if n <= 1:
         return list(range(n))
     index = _pairs(n)
-    clauses = [*_transitive(n)]
+    clauses = []
     for members, blocked, rule in rules:
         for b in blocked:
             if rule == "after":
@@ -39,13 +40,30 @@ def exact_order(n: int, rules: list[tuple]) -> list[int] | None:
                 clauses += [[-int(index[m, b]), -int(index[b, o])]
                             for m in members for o in members if m != o]  # fmt: skip
     with Solver(name=SOLVER, bootstrap_with=clauses) as solver:
-        if not solver.solve():
-            return None
-        true = np.zeros(n * (n - 1) // 2 + 1, bool)
-        model = np.array(solver.get_model() or [], int)
-        true[model[model > 0]] = True
-    before = np.where(index > 0, true[np.abs(index)], ~true[np.abs(index)]) & (index != 0)
-    return np.argsort(-before.sum(1), kind="stable").tolist()  # most parts above it: first
+        while True:
+            if not solver.solve():
+                return None
+            true = np.zeros(n * (n - 1) // 2 + 1, bool)
+            model = np.array(solver.get_model() or [], int)
+            true[model[model > 0]] = True
+            before = np.where(index > 0, true[np.abs(index)], ~true[np.abs(index)]) & (index != 0)
+            cycles = _cycles(before)
+            if not len(cycles):
+                return np.argsort(-before.sum(1), kind="stable").tolist()  # most above it: first
+            a, b, c = cycles.T
+            ab, bc, ac = index[a, b], index[b, c], index[a, c]
+            for clause in np.concatenate([np.stack([-ab, -bc, ac], 1),
+                                          np.stack([ab, bc, -ac], 1)]).tolist():  # fmt: skip
+                solver.add_clause(clause)
+
+
+def _cycles(before: np.ndarray) -> np.ndarray:
+    """(k, 3) the triples a < b < c of parts that `before` orders in a cycle, either way."""
+    ab, bc, ca = before[:, :, None], before[None, :, :], before.T[:, None, :]
+    cyclic = (ab & bc & ca) | (~ab & ~bc & ~ca)
+    a, b, c = np.nonzero(cyclic)
+    keep = (a < b) & (b < c)
+    return np.stack([a[keep], b[keep], c[keep]], 1)
 
 
 @lru_cache(maxsize=8)
@@ -56,19 +74,6 @@ def _pairs(n: int) -> np.ndarray:
     index[i, j] = np.arange(1, len(i) + 1)
     index[j, i] = -index[i, j]
     return index
-
-
-@lru_cache(maxsize=8)
-def _transitive(n: int) -> tuple[list[int], ...]:
-    """Clauses making the literals of `_pairs` a total order of n parts: no cycle of three
-    (enough in a tournament)."""
-    if n < 3:
-        return ()
-    index = _pairs(n)
-    a, b, c = np.array(list(combinations(range(n), 3))).T
-    ab, bc, ac = index[a, b], index[b, c], index[a, c]
-    return tuple(np.concatenate([np.stack([-ab, -bc, ac], 1),
-                                 np.stack([ab, bc, -ac], 1)]).tolist())  # fmt: skip
 
 
 def exact_stack(conflict: np.ndarray, rules: list[tuple], stack: int) -> list[int] | None:
