@@ -197,12 +197,16 @@ def _fixed_apart(points: np.ndarray) -> np.ndarray:
         return np.ptp((x[i, angles] - x[j, angles]) ** 2 + (y[i, angles] - y[j, angles]) ** 2, -1)
 
     i, j = np.triu_indices(len(points), 1)
+    still = (np.ptp(x, -1) == 0) & (np.ptp(y, -1) == 0)  # ground points: most of a bracket's
+    fixed = np.eye(len(points), dtype=bool)
+    both = still[i] & still[j]
+    fixed[i[both], j[both]] = True
+    i, j = i[~both], j[~both]
     for angles in (slice(None, None, 16), slice(None)):  # at every 16th angle first
         kept = spread(i, j, angles) <= tolerance
         i, j = i[kept], j[kept]
-    fixed = np.eye(len(points), dtype=bool)
-    fixed[i, j] = fixed[j, i] = True
-    return fixed
+    fixed[i, j] = True
+    return fixed | fixed.T
 
 
 def find_conflicts(

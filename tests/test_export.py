@@ -170,6 +170,25 @@ def test_conflicts_are_those_reckoned_at_every_angle(monkeypatch):
     assert np.allclose(fast.distance, slow.distance, rtol=1e-12, atol=1e-9)
 
 
+def test_pairs_that_keep_their_distance_are_those_reckoned_pair_by_pair():
+    """The joints of a Jansen leg with still points beside them (as a bracket's posts are):
+    the pairs found to keep their distance are those whose distance over every angle says so,
+    the still points among them all, and the joints of one plate."""
+    from linkd.export.layers import _fixed_apart
+
+    mech = classic.jansen_leg()
+    paths = sweep(mech, resolve_sizes(mech, assemble(mech).parts, None).link_width)
+    points = paths[..., 0] + 1j * paths[..., 1]
+    still = np.repeat(np.array([3 + 4j, -20 + 1j, 7 - 9j])[:, None], points.shape[1], 1)
+    points = np.concatenate([points, still])
+    gaps = np.abs(points[:, None] - points[None]) ** 2
+    keep = np.ptp(gaps, -1) <= 1e-9 * np.abs(points).max() ** 2
+    fixed = _fixed_apart(points)
+    assert np.array_equal(fixed, keep)
+    assert fixed[-3:, -3:].all() and fixed[-3:, np.flatnonzero(mech.fixed)].all()
+    assert 0 < fixed[: len(paths), : len(paths)].sum() - len(paths) < len(paths) ** 2 / 2
+
+
 def test_convex_hull_is_counter_clockwise_and_drops_interior_points():
     points = np.array([[0, 0], [1, 0], [0.5, 0.5], [1, 1], [0, 1], [0.5, 0.0]])
     assert convex_hull(points) == [0, 1, 3, 4]
