@@ -197,7 +197,7 @@ def _fixed_apart(points: np.ndarray) -> np.ndarray:
         return np.ptp((x[i, angles] - x[j, angles]) ** 2 + (y[i, angles] - y[j, angles]) ** 2, -1)
 
     i, j = np.triu_indices(len(points), 1)
-    still = (np.ptp(x, -1) == 0) & (np.ptp(y, -1) == 0)  # ground points: most of a bracket's
+    still = (np.ptp(x, -1) == 0) & (np.ptp(y, -1) == 0)  # the ground's: most of a bracket's points
     fixed = np.eye(len(points), dtype=bool)
     both = still[i] & still[j]
     fixed[i[both], j[both]] = True
