@@ -6,13 +6,13 @@
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round
 pins, `routing`; where bent ones cannot either, a mechanism made of modules on one crank is
-stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
+stacked a module between two frame plates, `framed`, and otherwise a few links may turn on
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
-or several do, `forked`, and last the parts at the motor's pivot turn on turntables,
-`turntable`), plates become
-STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop closures and
-crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
+or several do, `forked`, and last the parts at the motor's pivot turn on turntables, with
+forks or straps beside them, `turntable`), plates become STL meshes (`meshes`, outlined by
+`plates`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
+with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations

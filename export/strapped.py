@@ -14,14 +14,15 @@ inside it), and A must keep its other joints clear of the bore. Those pins may t
 layer through the sheave; in exchange A's outline grows by the sheave's disc, which other
 parts and pins must keep clear of like any plate. No strap turns at the motor pivot: the
 motor's shaft is there. One strap is tried, then two, the ones freeing the most pin crossings
-first; none is searched unless freeing every candidate crossing with no disc added (looser than
-any choice) layers at all.
+first, then sets of more round a core of straps (`_around_core`); none is searched unless
+freeing every candidate crossing with no disc added (looser than any choice) layers at all.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Collection, Iterator
 from dataclasses import replace
-from itertools import combinations, islice
+from itertools import chain, combinations, islice
 
 import numpy as np
 
@@ -45,26 +46,68 @@ MAX_STRAPS = 120  # layer searches per width before the construction gives up
 def strapped_layers(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, searches: int | None = None
 ) -> Layout:
-    """Layers with one or two parts made straps (NoFlatLayers when no choice tried layers),
+    """Layers with some parts made straps (NoFlatLayers when no choice tried layers),
     within MAX_STRAPS layer searches or `searches` if fewer."""
     conflicts = find_conflicts(assembly, paths, sizes)
-    options = _candidates(assembly, conflicts, paths[:, 0], sizes)
+    return strap_search(assembly, conflicts, paths, sizes, min(MAX_STRAPS, searches or MAX_STRAPS))
+
+
+def strap_search(
+    assembly: Assembly,
+    conflicts: Conflicts,
+    paths: np.ndarray,
+    sizes: Sizes,
+    searches: int = MAX_STRAPS,
+    then: Callable[[Conflicts], Conflicts] = lambda conflicts: conflicts,
+    whole: Collection[int] = (),
+) -> Layout:
+    """The straps' search on given conflicts, each choice's conflicts passed through `then`
+    before it is layered (another construction's rules on top: `turntable`), no part of
+    `whole` made a strap: the first `searches` choices of one strap or two, then, where that
+    is the full MAX_STRAPS (not a brief try beside frames), the sets round a core of straps."""
+    options = [s for s in _candidates(assembly, conflicts, paths[:, 0], sizes)
+               if s.part not in whole]  # fmt: skip
     freed = {s: _inside(assembly, paths[:, 0], sizes, s) & _near(conflicts, s) for s in options}
-    loose = [[q for q in near if not any(k in freed[s] and q == s.part for s in options)]
-             for k, near in enumerate(conflicts.blocked)]  # fmt: skip
-    if not options or _layered(assembly, replace(conflicts, blocked=loose), sizes) is None:
+
+    def loose(chosen: list[Strap]) -> bool:  # their crossings freed, with no disc: looser
+        blocked = [[q for q in near if not any(k in freed[s] and q == s.part for s in chosen)]
+                   for k, near in enumerate(conflicts.blocked)]  # fmt: skip
+        return _layered(assembly, then(replace(conflicts, blocked=blocked)), sizes) is not None
+
+    if not options or not loose(options):
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering")
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
-    choices = [(s,) for s in ranked] + list(combinations(ranked, 2))
+    choices = islice([(s,) for s in ranked] + list(combinations(ranked, 2)), searches)
+    if searches >= MAX_STRAPS:  # a full search: then the sets round a core of straps
+        choices = chain(choices, _around_core(ranked, loose))
     swept = _Swept(assembly, paths, sorted({s.joint for s in options}))
-    for chosen in islice(choices, min(MAX_STRAPS, searches or MAX_STRAPS)):
+    for chosen in choices:
         if len({s.part for s in chosen}) < len(chosen):
             continue
-        layout = _layered(assembly, _with_straps(assembly, conflicts, swept, sizes, chosen), sizes)
+        strapped = _with_straps(assembly, conflicts, swept, sizes, chosen)
+        layout = _layered(assembly, then(strapped), sizes)
         if layout is not None:
             straps = tuple(_passing(assembly, paths[:, 0], sizes, layout, s) for s in chosen)
             return replace(layout, straps=straps)
     raise NoFlatLayers("no strap tried lets the stack layer")
+
+
+def _around_core(ranked: list[Strap], loose: Callable[[list[Strap]], bool]) -> Iterator[tuple]:
+    """Where one or two straps do not do, more may: a core of straps, the fewest whose crossings
+    freed (with no disc) still layer, found by leaving out each in turn, the least freeing
+    first; then the core with one strap swapped for another, each only where it too layers
+    with no disc. Their discs may still clash, which the real search then finds."""
+    core = list(ranked)
+    for strap in reversed(ranked):
+        fewer = [s for s in core if s is not strap]
+        if loose(fewer):
+            core = fewer
+    yield tuple(core)
+    for k in range(len(core)):
+        for other in (s for s in ranked if s not in core):
+            swapped = [*core[:k], other, *core[k + 1 :]]
+            if len({s.part for s in swapped}) == len(swapped) and loose(swapped):
+                yield tuple(swapped)
 
 
 def _candidates(

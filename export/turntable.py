@@ -20,12 +20,15 @@ than this: docs/benchmarks.md.)
 The search is the forks' (`forked.fork_search`: whole parts first, then forks, none of a part
 on a turntable; a bracket only for the rings), on the split plates' candidates with those
 parts taken off the motor's pin: each has its layer to itself, and every pin but its own, and
-those inside its hole, keeps off that layer.
+those inside its hole, keeps off that layer. With the crank alone on a turntable, the straps'
+search (`strapped.strap_search`) comes last: some parts (never the crank) may turn round
+sheaves as straps, so the pins within a sheave cross its strap's layer.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -35,6 +38,7 @@ from .framed import posts_beyond
 from .layers import Conflicts, Layout, NoFlatLayers, Turntable, largest_step, stack_layers
 from .options import Sizes
 from .parts import Assembly
+from .strapped import strap_search
 
 
 def turntable_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -55,7 +59,8 @@ def _on_turntables(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, taken: set[int], brackets: bool
 ) -> Layout:
     """Layers with the parts `taken` on turntables, whole parts first, then forked ones (with
-    one ground pin on a bracket where `brackets`)."""
+    one ground pin on a bracket where `brackets`), then, for the crank alone (no `brackets`),
+    some parts made straps."""
     crank, motor = assembly.crank.child, assembly.crank.joint
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     searched = _off_pivot(assembly, motor, taken)
@@ -64,18 +69,24 @@ def _on_turntables(
     radii = {p: _radii(assembly, paths, p) for p in taken}  # (nearest, farthest) joint
     holes = {p: 0.0 if p == crank else _hole(radii[p][0], sizes) for p in taken}
     inside = {p: _inside(paths, motor, sizes, hole) for p, hole in holes.items()}
-    conflicts = _on_own_layers(union, conflicts, inside)
     real = len(assembly.parts)
-    whole = replace(conflicts, parts=conflicts.parts[:real, :real],
+    plain = replace(conflicts, parts=conflicts.parts[:real, :real],
                     distance=conflicts.distance[:real, :real],
                     blocked=[[q for q in near if q < real]
                              for near in conflicts.blocked[: len(assembly.pins)]])  # fmt: skip
+    conflicts = _on_own_layers(union, conflicts, inside)
+    own = partial(_on_own_layers, searched, inside=inside)  # the real parts' rules
     try:
-        layout = stack_layers(searched, whole, sizes, stubs=True)
+        layout = stack_layers(searched, own(plain), sizes, stubs=True)
     except NoFlatLayers:
-        layout = fork_search(searched, (union, roles, posts, conflicts), len(paths), sizes,
-                             lambda a, fork: fork[0] not in taken and drivable(a, fork),
-                             brackets=brackets)  # fmt: skip
+        try:
+            layout = fork_search(searched, (union, roles, posts, conflicts), len(paths), sizes,
+                                 lambda a, fork: fork[0] not in taken and drivable(a, fork),
+                                 brackets=brackets)  # fmt: skip
+        except NoFlatLayers:
+            if brackets:  # the rings: with straps, the bounds built nothing more
+                raise
+            layout = strap_search(searched, plain, paths, sizes, then=own, whole=taken)
     ring_posts = posts_beyond(paths, motor, sizes)
     tables = []
     for p in sorted(taken):

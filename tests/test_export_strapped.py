@@ -78,19 +78,74 @@ def test_the_strap_pieces_stay_out_of_the_bore():
         assert np.linalg.norm(hull.vertices[:, :2], axis=1).min() >= 3.0 * (1 - 1e-6)
 
 
-def test_a_strap_moved_onto_the_pin_it_passes_is_caught(strapped, tmp_path):
+def test_astrap_moved_onto_the_pin_it_passes_is_caught(strapped, tmp_path):
     """The strap's pieces shifted towards pivot 7 by the bore's margin over it: the ring now
     crosses pin 7, which verification must name."""
     out, result, _ = strapped
+    detail = strap_moved_onto(STRAPPED, out, result, tmp_path, "link_3_4", 3, 7)
+    assert "pin_7" in detail and "link_3_4_piece" in detail
+
+
+# Generated (seed 99, 7 to 13 joints, no. 198 of 300), in mm: no one strap or two lets it
+# layer; three do, each found round the fewest whose crossings freed would layer.
+THREE_STRAPS = Mechanism(
+    [(-28.466, 81.827), (-12.825, 87.814), (-17.722, 56.812), (-47.458, 6.209),
+     (-50.646, -28.55), (51.02, -45.211), (-74.375, -17.784), (-25.649, 47.206),
+     (94.58, -1.132), (-86.3, 70.939), (-14.325, 26.385), (-41.417, 27.98),
+     (-89.218, -82.202)],
+    [1, 0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 6), (1, 11), (2, 3), (2, 11), (3, 5), (3, 8), (4, 5),
+     (4, 10), (5, 6), (5, 9), (5, 10), (5, 12), (7, 8), (8, 9), (11, 12)],
+    (0, 1), 12, units="mm",
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory):
+    out = tmp_path_factory.mktemp("three_straps")
+    result, report = export_verified(THREE_STRAPS, out, {"mjcf", "stl"})
+    return out, result, report
+
+
+def test_three_straps_build_what_one_or_two_do_not(three):
+    out, result, report = three
+    assert report.passed, report.failed
+    parts = {p["name"]: p for p in result.parts}
+    sheaves = sorted(name for name, part in parts.items() if part["kind"] == "sheave")
+    assert sheaves == ["link_11_12_sheave", "link_3_5_sheave", "link_7_8_sheave"]
+    passing = 0
+    for name in sheaves:
+        sheave, strap = parts[name], parts[name.removesuffix("_sheave")]
+        assert sheave["layer"] == strap["layer"] and sheave["diameter"] == strap["bore"]
+        centre = THREE_STRAPS.positions[sheave["joints"][0]]
+        for joint in sheave["joints"][1:]:  # the pins it holds, clear of the strap
+            pin = parts[f"pin_{joint}"]
+            gap = strap["bore"] / 2 - np.linalg.norm(THREE_STRAPS.positions[joint] - centre)
+            assert gap >= pin["diameter"] / 2
+            passing += pin["layers"][0] <= strap["layer"] <= pin["layers"][1]
+        for path in [strap["mesh"], sheave["mesh"], *strap["pieces"]]:
+            assert trimesh.load(out / path).is_watertight
+    assert passing >= 3  # pins cross the straps' layers through their sheaves
+
+
+def test_one_of_three_straps_moved_onto_its_pin_is_caught(three, tmp_path):
+    """Link 7-8's strap, round a ground sheave at 7, shifted onto ground pin 4 that it passes."""
+    out, result, _ = three
+    detail = strap_moved_onto(THREE_STRAPS, out, result, tmp_path, "link_7_8", 7, 4)
+    assert "pin_4" in detail and "link_7_8_piece" in detail
+
+
+def strap_moved_onto(mech, out, result, tmp_path, strap: str, centre: int, joint: int) -> str:
+    """Verification's collisions once the strap's pieces are shifted from the sheave's centre
+    towards `joint` by the bore's margin over that pin and a pin's width more."""
     tree, geoms = editable_copy(out, tmp_path)
     parts = {p["name"]: p for p in result.parts}
-    toward = STRAPPED.positions[7] - STRAPPED.positions[3]
-    margin = parts["link_3_4"]["bore"] / 2 - np.linalg.norm(toward)
-    shift = toward / np.linalg.norm(toward) * (margin + parts["pin_7"]["diameter"])
-    shift = shift * UNITS_IN_METRES[STRAPPED.units]
+    toward = mech.positions[joint] - mech.positions[centre]
+    margin = parts[strap]["bore"] / 2 - np.linalg.norm(toward)
+    shift = toward / np.linalg.norm(toward) * (margin + parts[f"pin_{joint}"]["diameter"])
+    shift = shift * UNITS_IN_METRES[mech.units]
     for name, geom in geoms.items():
-        if name and name.startswith("link_3_4_piece"):
+        if name and name.startswith(f"{strap}_piece"):
             x, y, z = map(float, geom.get("pos").split())
             geom.set("pos", f"{x + shift[0]} {y + shift[1]} {z}")
-    detail = collision_detail(tree, tmp_path)
-    assert "pin_7" in detail and "link_3_4_piece" in detail
+    return collision_detail(tree, tmp_path)
