@@ -6,13 +6,13 @@
 The mechanism is split into rigid parts (`parts`), each part gets a layer from a sweep of the
 analytic kinematics (`layers`; where straight parts cannot be layered, links bend round
 pins, `routing`; where bent ones cannot either, a mechanism made of modules on one crank is
-stacked a module between two frame plates, `framed`, and otherwise a few links may turn on
+stacked a module between two frame plates, `framed`, and otherwise a link or two may turn on
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
-or several do, `forked`, and last the parts at the motor's pivot turn on turntables, with
-forks or straps beside them, `turntable`), plates become STL meshes (`meshes`, outlined by
-`plates`) and the bodies, hinges, pins, loop closures and crank servo become `mechanism.xml`
-with a `scene.xml` around it (`mjcf`).
+or several do, `forked`, then the parts at the motor's pivot turn on turntables, with forks
+or straps beside them, `turntable`, and last several links may be straps at once), plates
+become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop
+closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .plates import plate_points, plates
 from .refusal import why_refused
 from .routing import bent_layers
-from .strapped import strapped_layers
+from .strapped import several_straps_layers, strapped_layers
 from .turntable import turntable_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
@@ -61,7 +61,8 @@ FORMATS = frozenset({"mjcf", "stl"})
 CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  framed_layers: "modules between frames", strapped_layers: "eccentric straps",
                  braced_layers: "split plates and brackets", forked_layers: "forked parts",
-                 turntable_layers: "turntables at the motor's pivot"}  # fmt: skip
+                 turntable_layers: "turntables at the motor's pivot",
+                 several_straps_layers: "several eccentric straps at once"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -163,7 +164,8 @@ def _layered(
     layers), then parts turn on sheaves as eccentric straps (`strapped`), and then plates are
     cut into arms and ground pins are held by brackets or as stubs from both plates
     (`braced`, unless `options.brackets` is off), then a part forks, then the parts at the
-    motor's pivot turn on turntables (`turntable`); those three are SCREENED.
+    motor's pivot turn on turntables (`turntable`); those three are SCREENED; last, several
+    parts at once may be straps.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -180,7 +182,7 @@ def _layered(
     if modular(assembly) and not quick:  # a quick small search, before the straps' large one
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
-        layerings += [braced_layers, forked_layers, turntable_layers]
+        layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers]
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:

@@ -14,15 +14,16 @@ inside it), and A must keep its other joints clear of the bore. Those pins may t
 layer through the sheave; in exchange A's outline grows by the sheave's disc, which other
 parts and pins must keep clear of like any plate. No strap turns at the motor pivot: the
 motor's shaft is there. One strap is tried, then two, the ones freeing the most pin crossings
-first, then sets of more round a core of straps (`_around_core`); none is searched unless
-freeing every candidate crossing with no disc added (looser than any choice) layers at all.
+first; and last of all the constructions, sets of more round a core of straps
+(`several_straps_layers`). None is searched unless freeing every candidate crossing with no
+disc added (looser than any choice) layers at all.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import replace
-from itertools import chain, combinations, islice
+from itertools import combinations, islice
 
 import numpy as np
 
@@ -46,10 +47,17 @@ MAX_STRAPS = 120  # layer searches per width before the construction gives up
 def strapped_layers(
     assembly: Assembly, paths: np.ndarray, sizes: Sizes, searches: int | None = None
 ) -> Layout:
-    """Layers with some parts made straps (NoFlatLayers when no choice tried layers),
+    """Layers with one or two parts made straps (NoFlatLayers when no choice tried layers),
     within MAX_STRAPS layer searches or `searches` if fewer."""
     conflicts = find_conflicts(assembly, paths, sizes)
-    return strap_search(assembly, conflicts, paths, sizes, min(MAX_STRAPS, searches or MAX_STRAPS))
+    return strap_search(assembly, conflicts, paths, sizes, searches)
+
+
+def several_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """Layers with more straps at once, round a core of them (`_around_core`), where one or two
+    do not do: tried after every other construction, so what those build is left as it is."""
+    conflicts = find_conflicts(assembly, paths, sizes)
+    return strap_search(assembly, conflicts, paths, sizes, core=True)
 
 
 def strap_search(
@@ -57,14 +65,16 @@ def strap_search(
     conflicts: Conflicts,
     paths: np.ndarray,
     sizes: Sizes,
-    searches: int = MAX_STRAPS,
+    searches: int | None = None,
     then: Callable[[Conflicts], Conflicts] = lambda conflicts: conflicts,
     whole: Collection[int] = (),
+    core: bool = False,
 ) -> Layout:
     """The straps' search on given conflicts, each choice's conflicts passed through `then`
     before it is layered (another construction's rules on top: `turntable`), no part of
-    `whole` made a strap: the first `searches` choices of one strap or two, then, where that
-    is the full MAX_STRAPS (not a brief try beside frames), the sets round a core of straps."""
+    `whole` made a strap: the first MAX_STRAPS choices (or `searches` if fewer) of one strap
+    or two, or with `core` of the sets round a core of straps instead."""
+    budget = min(MAX_STRAPS, searches or MAX_STRAPS)
     options = [s for s in _candidates(assembly, conflicts, paths[:, 0], sizes)
                if s.part not in whole]  # fmt: skip
     freed = {s: _inside(assembly, paths[:, 0], sizes, s) & _near(conflicts, s) for s in options}
@@ -74,12 +84,11 @@ def strap_search(
                    for k, near in enumerate(conflicts.blocked)]  # fmt: skip
         return _layered(assembly, then(replace(conflicts, blocked=blocked)), sizes) is not None
 
-    if not options or not loose(options):
+    if not budget or not options or not loose(options):
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering")
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
-    choices = islice([(s,) for s in ranked] + list(combinations(ranked, 2)), searches)
-    if searches >= MAX_STRAPS:  # a full search: then the sets round a core of straps
-        choices = chain(choices, _around_core(ranked, loose))
+    few = [(s,) for s in ranked] + list(combinations(ranked, 2))
+    choices = islice(_around_core(ranked, loose) if core else few, budget)
     swept = _Swept(assembly, paths, sorted({s.joint for s in options}))
     for chosen in choices:
         if len({s.part for s in chosen}) < len(chosen):

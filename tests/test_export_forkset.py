@@ -12,6 +12,7 @@ from planted import collision_detail, editable_copy
 from pysat.solvers import Solver
 
 import linkd.export.forked as forked
+import linkd.export.strapped as strapped
 from linkd.export import export_mechanism
 from linkd.export.braced import best_brackets, swept_candidates
 from linkd.export.forkset import _Screen, fork_sets
@@ -61,6 +62,7 @@ def tripod(tmp_path_factory):
 
 def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path):
     monkeypatch.setattr(forked, "MAX_SETS", 0)
+    monkeypatch.setattr(strapped, "MAX_STRAPS", 0)  # a turntable with straps builds it too
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(TRIPOD, tmp_path, {"mjcf"})
     out, result, report = tripod
