@@ -110,7 +110,9 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     # the costly ones skip half the width where a quarter does not layer
     costly = ("split plates and brackets", "forked parts", "turntables at the motor's pivot")
     screened = [f"layering {c} at {w}" for c in costly for w in widths[::2]]
-    assert told == plain + screened + ["none layers: finding the pins that keep it from layering"]
+    last = [f"layering several eccentric straps at once at {w}" for w in widths]
+    why = ["none layers: finding the pins that keep it from layering"]
+    assert told == plain + screened + last + why
     passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = STUBBORN.positions[STUBBORN.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
