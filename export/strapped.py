@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import replace
-from itertools import combinations, islice
+from itertools import chain, combinations, islice
 
 import numpy as np
 
@@ -87,10 +87,10 @@ def strap_search(
     if not budget or not options or not loose(options):
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering")
     ranked = sorted(options, key=lambda s: -len(freed[s]))  # stable: the candidates' order
-    few = [(s,) for s in ranked] + list(combinations(ranked, 2))
-    choices = islice(_around_core(ranked, loose) if core else few, budget)
+    few = chain(((s,) for s in ranked), combinations(ranked, 2))  # one strap, then two
+    choices = _around_core(ranked, loose) if core else few
     swept = _Swept(assembly, paths, sorted({s.joint for s in options}))
-    for chosen in choices:
+    for chosen in islice(choices, budget):
         if len({s.part for s in chosen}) < len(chosen):
             continue
         strapped = _with_straps(assembly, conflicts, swept, sizes, chosen)
