@@ -113,19 +113,7 @@ def test_three_straps_build_what_one_or_two_do_not(three):
     parts = {p["name"]: p for p in result.parts}
     sheaves = sorted(name for name, part in parts.items() if part["kind"] == "sheave")
     assert sheaves == ["link_11_12_sheave", "link_3_5_sheave", "link_7_8_sheave"]
-    passing = 0
-    for name in sheaves:
-        sheave, strap = parts[name], parts[name.removesuffix("_sheave")]
-        assert sheave["layer"] == strap["layer"] and sheave["diameter"] == strap["bore"]
-        centre = THREE_STRAPS.positions[sheave["joints"][0]]
-        for joint in sheave["joints"][1:]:  # the pins it holds, clear of the strap
-            pin = parts[f"pin_{joint}"]
-            gap = strap["bore"] / 2 - np.linalg.norm(THREE_STRAPS.positions[joint] - centre)
-            assert gap >= pin["diameter"] / 2
-            passing += pin["layers"][0] <= strap["layer"] <= pin["layers"][1]
-        for path in [strap["mesh"], sheave["mesh"], *strap["pieces"]]:
-            assert trimesh.load(out / path).is_watertight
-    assert passing >= 3  # pins cross the straps' layers through their sheaves
+    assert sheaves_crossed(THREE_STRAPS, out, parts, sheaves) >= 3  # pins cross their layers
 
 
 def test_one_of_three_straps_moved_onto_its_pin_is_caught(three, tmp_path):
@@ -133,6 +121,25 @@ def test_one_of_three_straps_moved_onto_its_pin_is_caught(three, tmp_path):
     out, result, _ = three
     detail = strap_moved_onto(THREE_STRAPS, out, result, tmp_path, "link_7_8", 7, 4)
     assert "pin_4" in detail and "link_7_8_piece" in detail
+
+
+def sheaves_crossed(mech: Mechanism, out, parts: dict, sheaves) -> int:
+    """How many pins cross a strap's layer through its sheave, once each sheave is checked: on
+    its strap's layer and as wide as its bore, the pins it holds clear of the strap, the strap
+    and sheave watertight."""
+    crossed = 0
+    for name in sheaves:
+        sheave, strap = parts[name], parts[name.removesuffix("_sheave")]
+        assert sheave["layer"] == strap["layer"] and sheave["diameter"] == strap["bore"]
+        centre = mech.positions[sheave["joints"][0]]
+        for joint in sheave["joints"][1:]:  # the pins it holds, clear of the strap
+            pin = parts[f"pin_{joint}"]
+            gap = strap["bore"] / 2 - np.linalg.norm(mech.positions[joint] - centre)
+            assert gap >= pin["diameter"] / 2
+            crossed += pin["layers"][0] <= strap["layer"] <= pin["layers"][1]
+        for path in [strap["mesh"], sheave["mesh"], *strap["pieces"]]:
+            assert trimesh.load(out / path).is_watertight
+    return crossed
 
 
 def strap_moved_onto(mech, out, result, tmp_path, strap: str, centre: int, joint: int) -> str:
