@@ -10,7 +10,8 @@ stacked a module between two frame plates, `framed`, and otherwise a link or two
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
 or several do, `forked`, then the parts at the motor's pivot turn on turntables, with forks
-or straps beside them, `turntable`, and last several links may be straps at once), plates
+or straps beside them, `turntable`, and last several links may be straps at once, beside a
+turntable or not), plates
 become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop
 closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
@@ -51,7 +52,7 @@ from .plates import plate_points, plates
 from .refusal import why_refused
 from .routing import bent_layers
 from .strapped import several_straps_layers, strapped_layers
-from .turntable import turntable_layers
+from .turntable import turntable_core_layers, turntable_layers
 
 __all__ = ["FORMATS", "TIMESTEP", "ExportOptions", "ExportResult", "buildable",
            "export_mechanism", "hinge_angles", "joint_paths", "qpos_at",
@@ -62,7 +63,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  framed_layers: "modules between frames", strapped_layers: "eccentric straps",
                  braced_layers: "split plates and brackets", forked_layers: "forked parts",
                  turntable_layers: "turntables at the motor's pivot",
-                 several_straps_layers: "several eccentric straps at once"}  # fmt: skip
+                 several_straps_layers: "several eccentric straps at once",
+                 turntable_core_layers: "a turntable with several straps"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -165,7 +167,7 @@ def _layered(
     cut into arms and ground pins are held by brackets or as stubs from both plates
     (`braced`, unless `options.brackets` is off), then a part forks, then the parts at the
     motor's pivot turn on turntables (`turntable`); those three are SCREENED; last, several
-    parts at once may be straps.
+    parts at once may be straps, then as many beside the crank on a turntable.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -182,7 +184,8 @@ def _layered(
     if modular(assembly) and not quick:  # a quick small search, before the straps' large one
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
-        layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers]
+        layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
+                      turntable_core_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:

@@ -22,7 +22,9 @@ on a turntable; a bracket only for the rings), on the split plates' candidates w
 parts taken off the motor's pin: each has its layer to itself, and every pin but its own, and
 those inside its hole, keeps off that layer. With the crank alone on a turntable, the straps'
 search (`strapped.strap_search`) comes last: some parts (never the crank) may turn round
-sheaves as straps, so the pins within a sheave cross its strap's layer.
+sheaves as straps, so the pins within a sheave cross its strap's layer. One strap or two are
+tried here; more, round a core of straps, only after every other construction
+(`turntable_core_layers`), so that several straps with no turntable come first.
 """
 
 from __future__ import annotations
@@ -55,12 +57,23 @@ def turntable_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Lay
     return _on_turntables(assembly, paths, sizes, others, brackets=True)
 
 
+def turntable_core_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """Layers with the crank alone on a turntable and several parts straps round a core of
+    them, the last construction tried (NoFlatLayers where none layers)."""
+    return _on_turntables(assembly, paths, sizes, {assembly.crank.child}, False, core=True)
+
+
 def _on_turntables(
-    assembly: Assembly, paths: np.ndarray, sizes: Sizes, taken: set[int], brackets: bool
+    assembly: Assembly,
+    paths: np.ndarray,
+    sizes: Sizes,
+    taken: set[int],
+    brackets: bool,
+    core: bool = False,
 ) -> Layout:
     """Layers with the parts `taken` on turntables, whole parts first, then forked ones (with
     one ground pin on a bracket where `brackets`), then, for the crank alone (no `brackets`),
-    some parts made straps."""
+    one or two parts made straps; with `core`, only several straps round a core."""
     crank, motor = assembly.crank.child, assembly.crank.joint
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     searched = _off_pivot(assembly, motor, taken)
@@ -76,9 +89,15 @@ def _on_turntables(
                              for near in conflicts.blocked[: len(assembly.pins)]])  # fmt: skip
     conflicts = _on_own_layers(union, conflicts, inside)
     own = partial(_on_own_layers, searched, inside=inside)  # the real parts' rules
+    straps = partial(strap_search, searched, plain, paths, sizes, then=own, whole=taken)
     try:
-        layout = stack_layers(searched, own(plain), sizes, stubs=True)
+        if core:  # several straps round a core: the last construction tried
+            layout = straps(core=True)
+        else:
+            layout = stack_layers(searched, own(plain), sizes, stubs=True)
     except NoFlatLayers:
+        if core:
+            raise
         try:
             layout = fork_search(searched, (union, roles, posts, conflicts), len(paths), sizes,
                                  lambda a, fork: fork[0] not in taken and drivable(a, fork),
@@ -86,7 +105,7 @@ def _on_turntables(
         except NoFlatLayers:
             if brackets:  # the rings: with straps, the bounds built nothing more
                 raise
-            layout = strap_search(searched, plain, paths, sizes, then=own, whole=taken)
+            layout = straps()
     ring_posts = posts_beyond(paths, motor, sizes)
     tables = []
     for p in sorted(taken):

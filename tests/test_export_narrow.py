@@ -110,7 +110,8 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     # the costly ones skip half the width where a quarter does not layer
     costly = ("split plates and brackets", "forked parts", "turntables at the motor's pivot")
     screened = [f"layering {c} at {w}" for c in costly for w in widths[::2]]
-    last = [f"layering several eccentric straps at once at {w}" for w in widths]
+    last = [f"layering {c} at {w}" for c in ("several eccentric straps at once",
+            "a turntable with several straps") for w in widths]  # fmt: skip
     why = ["none layers: finding the pins that keep it from layering"]
     assert told == plain + screened + last + why
     passed = []

@@ -1,7 +1,9 @@
 """Straps beside a turntable (linkd.export.turntable with linkd.export.strapped): the crank a
 disc on its own layer, and two links made straps round sheaves, so pins cross the straps'
 layers. Neither construction builds the mechanism alone; together they do, verified in
-MuJoCo, and a strap planted over a pin its sheave lets through is caught."""
+MuJoCo, and a strap planted over a pin its sheave lets through is caught. Where one strap or
+two beside the turntable do not do, more round a core may (tried last of all): four build
+another mechanism."""
 
 import json
 
@@ -33,6 +35,21 @@ TABLE_STRAPPED = Mechanism(
 )  # fmt: skip
 CRANK = "plate_0_1_2_5_8"
 SHEAVES = {"link_4_15_sheave": "link_1_4", "link_9_12_sheave": "ground"}  # -> fixed in
+
+# Generated (seed 31, no. 19 of 100), in mm: with the crank plate on a turntable, no one or two
+# straps layer it; four, round a core of straps, do.
+FOUR_STRAPS = Mechanism(
+    [(95.842, 79.033), (77.251, 35.366), (-53.841, 43.25), (37.114, 38.516), (-19.896, -82.098),
+     (46.893, 15.948), (33.507, 82.849), (41.761, -79.81), (2.969, 95.718), (-76.038, 10.556),
+     (-2.394, -31.361), (-29.782, 69.437), (-87.845, -71.437), (73.606, -49.776),
+     (-36.029, -6.245), (-41.227, -90.274), (40.767, -24.924)],
+    [1, 0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 1, 0, 1, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 6), (1, 10), (1, 14), (1, 15), (2, 4), (2, 7), (2, 16), (3, 4),
+     (5, 6), (6, 7), (6, 10), (7, 9), (8, 9), (9, 12), (11, 12), (11, 15), (12, 16), (13, 14)],
+    (0, 1), 16, units="mm",
+)  # fmt: skip
+FOUR_SHEAVES = {"link_3_4_sheave": "ground", "link_8_9_sheave": "ground",
+                "link_11_12_sheave": "ground", "link_1_15_sheave": "plate_0_1_2"}  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +91,12 @@ def test_a_strap_moved_onto_a_pin_its_sheave_lets_through_is_caught(built, tmp_p
     out, result, _ = built
     detail = strap_moved_onto(TABLE_STRAPPED, out, result, tmp_path, "link_4_15", 4, 1)
     assert "pin_1" in detail and "link_4_15_piece" in detail
+
+
+def test_four_straps_round_a_core_beside_the_turntable_are_built_and_verified(tmp_path):
+    result, report = export_verified(FOUR_STRAPS, tmp_path, {"mjcf", "stl"})
+    assert report.passed, report.failed
+    assert result.turntable == "plate_0_1_2"
+    parts = {p["name"]: p for p in json.loads((tmp_path / "mechanism.json").read_text())["parts"]}
+    assert {n: p["fixed_in"] for n, p in parts.items() if p["kind"] == "sheave"} == FOUR_SHEAVES
+    assert sheaves_crossed(FOUR_STRAPS, tmp_path, parts, FOUR_SHEAVES)
