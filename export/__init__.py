@@ -10,8 +10,8 @@ stacked a module between two frame plates, `framed`, and otherwise a link or two
 sheaves as eccentric straps, `strapped`, then plates are cut into arms and ground pins are
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
 or several do, `forked`, then the parts at the motor's pivot turn on turntables, with forks
-or straps beside them, `turntable`, and last several links may be straps at once, beside a
-turntable or not), plates
+or straps beside them, `turntable`, then several links may be straps at once, beside a
+turntable or not, and last plates are cut into arms beside straps, `braced`), plates
 become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop
 closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
@@ -31,7 +31,7 @@ from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
-from .braced import braced_layers
+from .braced import braced_layers, split_straps_layers
 from .described import describe_parts
 from .forked import forked_layers
 from .framed import framed_layers, modular
@@ -64,7 +64,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  braced_layers: "split plates and brackets", forked_layers: "forked parts",
                  turntable_layers: "turntables at the motor's pivot",
                  several_straps_layers: "several eccentric straps at once",
-                 turntable_core_layers: "a turntable with several straps"}  # fmt: skip
+                 turntable_core_layers: "a turntable with several straps",
+                 split_straps_layers: "split plates with straps"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -72,7 +73,7 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
 # search finds none there, the widths between are not tried.
-SCREENED = frozenset({braced_layers, forked_layers, turntable_layers})
+SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers})
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -166,8 +167,9 @@ def _layered(
     layers), then parts turn on sheaves as eccentric straps (`strapped`), and then plates are
     cut into arms and ground pins are held by brackets or as stubs from both plates
     (`braced`, unless `options.brackets` is off), then a part forks, then the parts at the
-    motor's pivot turn on turntables (`turntable`); those three are SCREENED; last, several
-    parts at once may be straps, then as many beside the crank on a turntable.
+    motor's pivot turn on turntables (`turntable`); then several parts at once may be straps,
+    then as many beside the crank on a turntable, and last plates are cut into arms beside
+    straps (`braced`); the forks, the turntables and both splits are SCREENED.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -185,7 +187,7 @@ def _layered(
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
-                      turntable_core_layers]  # fmt: skip
+                      turntable_core_layers, split_straps_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:

@@ -30,6 +30,12 @@ layered from its share of them, the fewest brackets first, then the fewest split
 stars first; only where no star layers are the cuts along the plates' own links searched,
 with a search budget of their own. A choice is not searched when the same split plates with
 no ground pins at all (a looser problem than any bracket, base, cover or stubs) do not layer.
+
+Last of all the constructions, split plates and eccentric straps (`strapped`) are tried
+together (`split_straps_layers`): in a few mechanisms a plate must be cut so that its arms lie
+on both sides of a part, and a link must turn on a sheave so that a pin may cross its layer,
+and neither alone layers. Each split, fewest first, gets the straps' own search, with no
+bracket and no arm made a strap.
 """
 
 from __future__ import annotations
@@ -53,12 +59,14 @@ from .layers import (
 from .options import Sizes
 from .parts import Assembly, Part, Pin
 from .rods import keyed
+from .strapped import strap_search
 
 DIRECTIONS = 16  # directions tried for a bracket's arm
 POST_MARGIN = 2.0  # link widths between the post and the farthest point the mechanism sweeps
 MAX_SEARCHES = 300  # layer searches per width before the construction gives up
 MAX_LINK_CUTS = 100  # and then for plates cut along their own links
 MAX_LINK_SETS = 20_000  # sets of a plate's links tried as trees of arms
+MAX_SPLIT_STRAPS = 16  # splits tried with straps (`split_straps_layers`); those built took 4
 
 
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -71,13 +79,9 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
     bracket = best_brackets(conflicts, roles)
 
     def layered(split: dict[int, tuple], held: tuple[int, ...], relaxed: bool = False):
-        keep = [q for q, role in enumerate(roles)
-                if (role[0] == "part" and role[1] not in split)
-                or (role[0] == "arm" and role[2] in split.get(role[1], ()))
-                or q in [bracket[g] for g in held]]  # fmt: skip
+        keep = _kept(roles, split, [bracket[g] for g in held])
         chosen, share = _subset(union, conflicts, keep, held, ground if relaxed else ())
-        arms = [sum(roles[keep[m]][0] == "arm" for m in pin.members) for pin in chosen.pins]
-        shafts = [k for k, count in enumerate(arms) if count >= 2]  # stay whole at the ground
+        shafts = _shafts(chosen, [roles[q] for q in keep])
         layout = stack_layers(chosen, share, sizes, stubs=True, whole=shafts, fewest=not relaxed)
         return layout, keep, chosen
 
@@ -98,6 +102,55 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
         layout, keep, chosen = found
         return _real(assembly, layout, chosen, [roles[q] for q in keep], posts, len(paths))
     raise refusal or ValueError("no split plates or brackets layer within the search")
+
+
+def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """Layers with some plates cut into arms and some whole parts made straps at once, for the
+    few mechanisms neither builds alone (NoFlatLayers where none of the first MAX_SPLIT_STRAPS
+    splits, stars and cuts along the plates' own links, the fewest split plates first, layers
+    with one strap or two, or round a core of them: `strapped.strap_search`). No bracket:
+    the stubs from base and cover hold the ground pins."""
+    plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
+    union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
+    stars = {q: _stars(assembly.parts[q]) for q in plates}
+    ways = {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0]) for q in plates}
+    crank, motor = assembly.crank.child, assembly.crank.joint
+    for split in islice((s for s in _splits(ways) if s), MAX_SPLIT_STRAPS):
+        keep = _kept(roles, split, [])
+        chosen, share = _subset(union, conflicts, keep, ())
+        kept = [roles[q] for q in keep]
+        driven = next(k for k, role in enumerate(kept)  # the crank, or its arm at the motor
+                      if role[1] == crank and motor in chosen.parts[k].joints)  # fmt: skip
+        chosen = replace(chosen, hinges=[replace(assembly.crank, child=driven)])
+        arms = [k for k, role in enumerate(kept) if role[0] == "arm"]  # no arm is a strap
+        for core in (False, True):
+            try:
+                layout = strap_search(chosen, share, paths, sizes, whole=arms, core=core,
+                                      shafts=_shafts(chosen, kept))  # fmt: skip
+            except NoFlatLayers:
+                continue
+            real = _real(assembly, layout, chosen, kept, posts, len(paths))
+            straps = [replace(strap, part=kept[strap.part][1], sheave_of=kept[strap.sheave_of][1],
+                              passing=tuple(k for k in strap.passing if k < len(assembly.pins)))
+                      for strap in layout.straps]  # fmt: skip
+            return replace(real, straps=tuple(straps))
+    raise NoFlatLayers("no split plates tried layer with straps")
+
+
+def _kept(roles: list[tuple], split: dict[int, tuple], brackets: list[int]) -> list[int]:
+    """The candidates of a choice: the parts not split, the arms of those `split` (each
+    plate's cut), and the `brackets` candidates."""
+    return [q for q, role in enumerate(roles)
+            if (role[0] == "part" and role[1] not in split)
+            or (role[0] == "arm" and role[2] in split.get(role[1], ()))
+            or q in brackets]  # fmt: skip
+
+
+def _shafts(chosen: Assembly, roles: list[tuple]) -> list[int]:
+    """The pins of `chosen` where two arms meet: they stay whole at the ground (the shaft a
+    split part's arms are fixed on)."""
+    arms = [sum(roles[m][0] == "arm" for m in pin.members) for pin in chosen.pins]
+    return [k for k, count in enumerate(arms) if count >= 2]
 
 
 def _first(

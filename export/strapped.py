@@ -69,11 +69,13 @@ def strap_search(
     then: Callable[[Conflicts], Conflicts] = lambda conflicts: conflicts,
     whole: Collection[int] = (),
     core: bool = False,
+    shafts: Collection[int] = (),
 ) -> Layout:
     """The straps' search on given conflicts, each choice's conflicts passed through `then`
     before it is layered (another construction's rules on top: `turntable`), no part of
     `whole` made a strap: the first MAX_STRAPS choices (or `searches` if fewer) of one strap
-    or two, or with `core` of the sets round a core of straps instead."""
+    or two, or with `core` of the sets round a core of straps instead. The pins `shafts` (a
+    split part's, `braced`) stay whole at the ground."""
     budget = min(MAX_STRAPS, searches or MAX_STRAPS)
     options = [s for s in _candidates(assembly, conflicts, paths[:, 0], sizes)
                if s.part not in whole]  # fmt: skip
@@ -82,7 +84,8 @@ def strap_search(
     def loose(chosen: list[Strap]) -> bool:  # their crossings freed, with no disc: looser
         blocked = [[q for q in near if not any(k in freed[s] and q == s.part for s in chosen)]
                    for k, near in enumerate(conflicts.blocked)]  # fmt: skip
-        return _layered(assembly, then(replace(conflicts, blocked=blocked)), sizes) is not None
+        layered = _layered(assembly, then(replace(conflicts, blocked=blocked)), sizes, shafts)
+        return layered is not None
 
     if not budget or not options or not loose(options):
         raise NoFlatLayers("no strap frees the pins that keep the stack from layering")
@@ -94,7 +97,7 @@ def strap_search(
         if len({s.part for s in chosen}) < len(chosen):
             continue
         strapped = _with_straps(assembly, conflicts, swept, sizes, chosen)
-        layout = _layered(assembly, then(strapped), sizes)
+        layout = _layered(assembly, then(strapped), sizes, shafts)
         if layout is not None:
             straps = tuple(_passing(assembly, paths[:, 0], sizes, layout, s) for s in chosen)
             return replace(layout, straps=straps)
@@ -225,12 +228,14 @@ def _with_straps(
     return replace(conflicts, parts=near, blocked=blocked, distance=distance)
 
 
-def _layered(assembly: Assembly, conflicts: Conflicts, sizes: Sizes) -> Layout | None:
-    """Layers with every ground pin whole, else held from both plates; None if neither. The
-    stubs' search goes first: it is looser than any whole layering, so where it finds none
-    (as for most strap choices) the whole pins' search is spared."""
+def _layered(
+    assembly: Assembly, conflicts: Conflicts, sizes: Sizes, shafts: Collection[int] = ()
+) -> Layout | None:
+    """Layers with every ground pin whole, else held from both plates but `shafts`; None if
+    neither. The stubs' search goes first: it is looser than any whole layering, so where it
+    finds none (as for most strap choices) the whole pins' search is spared."""
     try:
-        held = stack_layers(assembly, conflicts, sizes, stubs=True)
+        held = stack_layers(assembly, conflicts, sizes, stubs=True, whole=shafts)
     except NoFlatLayers:
         return None
     try:

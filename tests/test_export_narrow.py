@@ -112,8 +112,9 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     screened = [f"layering {c} at {w}" for c in costly for w in widths[::2]]
     last = [f"layering {c} at {w}" for c in ("several eccentric straps at once",
             "a turntable with several straps") for w in widths]  # fmt: skip
+    split = [f"layering split plates with straps at {w}" for w in widths[::2]]  # screened
     why = ["none layers: finding the pins that keep it from layering"]
-    assert told == plain + screened + last + why
+    assert told == plain + screened + last + split + why
     passed = []
     t = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     target = STUBBORN.positions[STUBBORN.end_effector] + 10 * np.c_[np.cos(t), np.sin(t)]
