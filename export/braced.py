@@ -35,7 +35,7 @@ Last of all the constructions, split plates and eccentric straps (`strapped`) ar
 together (`split_straps_layers`): in a few mechanisms a plate must be cut so that its arms lie
 on both sides of a part, and a link must turn on a sheave so that a pin may cross its layer,
 and neither alone layers. Each split, fewest first, gets the straps' own search, with no
-bracket and no arm made a strap.
+bracket; an arm may be a strap too (bored round the sheave at one of its joints).
 """
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
 
 
 def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """Layers with some plates cut into arms and some whole parts made straps at once, for the
+    """Layers with some plates cut into arms and some parts or arms made straps at once, for the
     few mechanisms neither builds alone (NoFlatLayers where none of the first MAX_SPLIT_STRAPS
     splits, stars and cuts along the plates' own links, the fewest split plates first, layers
     with one strap or two, or round a core of them: `strapped.strap_search`). No bracket:
@@ -122,16 +122,16 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
         driven = next(k for k, role in enumerate(kept)  # the crank, or its arm at the motor
                       if role[1] == crank and motor in chosen.parts[k].joints)  # fmt: skip
         chosen = replace(chosen, hinges=[replace(assembly.crank, child=driven)])
-        arms = [k for k, role in enumerate(kept) if role[0] == "arm"]  # no arm is a strap
         for core in (False, True):
             try:
-                layout = strap_search(chosen, share, paths, sizes, whole=arms, core=core,
+                layout = strap_search(chosen, share, paths, sizes, core=core,
                                       shafts=_shafts(chosen, kept))  # fmt: skip
             except NoFlatLayers:
                 continue
             real = _real(assembly, layout, chosen, kept, posts, len(paths))
             straps = [replace(strap, part=kept[strap.part][1], sheave_of=kept[strap.sheave_of][1],
-                              passing=tuple(k for k in strap.passing if k < len(assembly.pins)))
+                              passing=tuple(k for k in strap.passing if k < len(assembly.pins)),
+                              arm=kept[strap.part][2] if kept[strap.part][0] == "arm" else ())
                       for strap in layout.straps]  # fmt: skip
             return replace(real, straps=tuple(straps))
     raise NoFlatLayers("no split plates tried layer with straps")

@@ -94,6 +94,8 @@ class Strap:
     sheave_of: int
     radius: float  # mechanism units
     passing: tuple[int, ...]
+    arm: tuple[int, int] | tuple[()] = ()  # the arm's joints where the strap is an arm of a split
+    # part (`braced.split_straps_layers`)
 
 
 @dataclass(frozen=True)

@@ -287,7 +287,7 @@ def build_mjcf(
     for shaft in layout.shafts:
         b.rod(shaft.part, shaft.name, shaft.joint, shaft.span)
     for strap in layout.straps:  # the strap turns on its sheave, the pins pass through it
-        name = sheave_name(assembly, strap)
+        name = sheave_name(assembly, layout, strap)
         ET.SubElement(contact, "exclude", body1=name, body2=assembly.parts[strap.part].name)
         through = {strap.joint, *(assembly.pins[k].joint for k in strap.passing)}
         for rod in rods:

@@ -60,16 +60,18 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     for k, table in enumerate(tables):  # a ring round each, with a bar out to each post
         out.append(Plate(f"{ground.name}_ring{k or ''}", 0, (table.joint,), table.layer,
                          posts=table.posts, bore=table.bore))  # fmt: skip
-    straps = {strap.part: strap for strap in layout.straps}
+    straps = {(strap.part, strap.arm): strap for strap in layout.straps}
     for strap in layout.straps:
         through = (assembly.pins[k].joint for k in strap.passing)
-        out.append(Plate(sheave_name(assembly, strap), strap.sheave_of, (strap.joint, *through),
-                         int(layout.layers[strap.part]), sheave=strap.radius))  # fmt: skip
+        layer = next((arm.layer for arm in layout.arms.get(strap.part, ())
+                      if arm.joints == strap.arm), int(layout.layers[strap.part]))  # fmt: skip
+        out.append(Plate(sheave_name(assembly, layout, strap), strap.sheave_of,
+                         (strap.joint, *through), layer, sheave=strap.radius))  # fmt: skip
     for p, part in enumerate(assembly.parts[1:], start=1):
-        if p in straps:
-            joint = straps[p].joint
-            joints = (joint, *(j for j in part.joints if j != joint))
-            out.append(Plate(part.name, p, joints, int(layout.layers[p]), bore=straps[p].radius))
+        if (p, ()) in straps:
+            strap = straps[p, ()]
+            joints = (strap.joint, *(j for j in part.joints if j != strap.joint))
+            out.append(Plate(part.name, p, joints, int(layout.layers[p]), bore=strap.radius))
             continue
         table = next((table for table in tables if table.part == p), None)
         if table:
@@ -78,7 +80,12 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
                              disc=table.radius))  # fmt: skip
             continue
         for k, arm in enumerate(layout.arms.get(p, ())):
-            out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
+            strap = straps.get((p, arm.joints))  # an arm turning on a sheave: bored round it
+            if strap is None:
+                out.append(Plate(f"{part.name}_arm{k}", p, arm.joints, arm.layer))
+                continue
+            joints = (strap.joint, *(j for j in arm.joints if j != strap.joint))
+            out.append(Plate(f"{part.name}_arm{k}", p, joints, arm.layer, bore=strap.radius))
         if p not in layout.arms:
             bends = tuple(map(tuple, layout.bends.get(p, np.empty((0, 2))).tolist()))
             out.append(Plate(part.name, p, part.joints, int(layout.layers[p]), bends))
@@ -90,9 +97,12 @@ def _held(ends: list[tuple[int, tuple[int, int]]], layer: int) -> tuple[int, ...
     return tuple(sorted({joint for joint, (lo, hi) in ends if lo <= layer <= hi}))
 
 
-def sheave_name(assembly: Assembly, strap: Strap) -> str:
-    """The sheave's plate and body: named after the strap that turns on it."""
-    return f"{assembly.parts[strap.part].name}_sheave"
+def sheave_name(assembly: Assembly, layout: Layout, strap: Strap) -> str:
+    """The sheave's plate and body: named after the strap that turns on it (its part, or its
+    arm's plate)."""
+    name = assembly.parts[strap.part].name
+    arms = [arm.joints for arm in layout.arms.get(strap.part, ())]
+    return f"{name}_arm{arms.index(strap.arm)}_sheave" if strap.arm else f"{name}_sheave"
 
 
 def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:

@@ -11,6 +11,7 @@ import trimesh
 from planted import collision_detail, editable_copy
 from pysat.solvers import Solver
 
+import linkd.export.braced as braced
 import linkd.export.forked as forked
 import linkd.export.strapped as strapped
 from linkd.export import export_mechanism
@@ -92,6 +93,7 @@ def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path)
 
 def test_forks_round_a_bracket_build_what_no_single_fork_does(monkeypatch, tmp_path):
     monkeypatch.setattr(forked, "MAX_SETS", 0)
+    monkeypatch.setattr(braced, "MAX_SPLIT_STRAPS", 0)  # which builds it too, without forks
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BRACED, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()

@@ -1,7 +1,7 @@
 """Split plates with straps (linkd.export.braced.split_straps_layers): a plate cut into arms
 and links made straps round sheaves at once. Neither construction builds the mechanism alone;
 together they do, verified in MuJoCo, and a strap planted over a pin its sheave lets through
-is caught."""
+is caught. An arm of a split plate may be a strap itself."""
 
 import json
 
@@ -34,6 +34,19 @@ SPLIT_STRAPPED = Mechanism(
 )  # fmt: skip
 CRANK = "plate_0_1_2_3_8_9_10_15"
 SHEAVES = {"link_1_12_sheave": CRANK, "link_2_7_sheave": CRANK, "link_13_14_sheave": "ground"}
+
+# Generated (seed 41, no. 69 of 100), in mm: plate 1-4-8-9 is cut into a star at 4, and its
+# arm 1-4 turns on a sheave of the crank at 1 that lets the motor's shaft through.
+ARM_STRAPPED = Mechanism(
+    [(-1.615, 82.314), (-12.226, 77.196), (39.54, 29.866), (-21.384, 10.908), (72.268, 82.953),
+     (73.133, -73.917), (1.039, 18.983), (-53.87, -54.524), (15.016, -73.082), (85.789, -18.235),
+     (87.167, 87.506), (-1.282, 89.294), (43.699, 7.196), (-52.481, 93.187), (-70.663, 33.596)],
+    [1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 4), (1, 7), (1, 8), (2, 7), (2, 14), (3, 4), (3, 10), (4, 6),
+     (4, 8), (4, 9), (5, 6), (7, 13), (8, 9), (8, 10), (9, 14), (10, 12), (11, 12), (12, 13)],
+    (0, 1), 14, units="mm",
+)  # fmt: skip
+ARM = "plate_1_4_8_9_arm0"
 
 
 @pytest.fixture(scope="module")
@@ -73,3 +86,21 @@ def test_a_strap_moved_onto_a_pin_its_sheave_lets_through_is_caught(built, tmp_p
     out, result, _ = built
     detail = strap_moved_onto(SPLIT_STRAPPED, out, result, tmp_path, "link_2_7", 2, 0)
     assert "pin_0" in detail and "link_2_7_piece" in detail
+
+
+def test_an_arm_made_a_strap_is_built_verified_and_checked(tmp_path):
+    """Built and verified; its strap, shifted onto the motor's shaft, is caught."""
+    out, planted = tmp_path / "built", tmp_path / "planted"
+    out.mkdir(), planted.mkdir()
+    result, report = export_verified(ARM_STRAPPED, out, {"mjcf", "stl"})
+    assert report.passed, report.failed
+    parts = {p["name"]: p for p in json.loads((out / "mechanism.json").read_text())["parts"]}
+    arm, sheave = parts[ARM], parts[f"{ARM}_sheave"]
+    assert arm["arm_of"] == "plate_1_4_8_9" and arm["joints"] == [1, 4]  # bored round joint 1
+    assert sheave["fixed_in"] == "plate_0_1_2_7" and sheave["joints"] == [1, 0]
+    sheaves = [n for n, p in parts.items() if p["kind"] == "sheave"]
+    assert sheaves_crossed(ARM_STRAPPED, out, parts, sheaves)
+    lo, hi = parts["pin_0"]["layers"]
+    assert lo <= arm["layer"] <= hi  # the motor's shaft crosses the arm's layer in its sheave
+    detail = strap_moved_onto(ARM_STRAPPED, out, result, planted, ARM, 1, 0)
+    assert "pin_0" in detail and f"{ARM}_piece" in detail
