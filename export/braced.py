@@ -128,9 +128,10 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
                                       shafts=_shafts(chosen, kept))  # fmt: skip
             except NoFlatLayers:
                 continue
+            if any(k >= len(assembly.pins) for strap in layout.straps for k in strap.passing):
+                break  # a split part's own shaft would cross a sheave: the next split
             real = _real(assembly, layout, chosen, kept, posts, len(paths))
             straps = [replace(strap, part=kept[strap.part][1], sheave_of=kept[strap.sheave_of][1],
-                              passing=tuple(k for k in strap.passing if k < len(assembly.pins)),
                               arm=kept[strap.part][2] if kept[strap.part][0] == "arm" else ())
                       for strap in layout.straps]  # fmt: skip
             return replace(real, straps=tuple(straps))
