@@ -87,8 +87,7 @@ def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout
 
     # every plate left out, no ground pin at all: looser than any choice (NoFlatLayers if not)
     layered({q: () for q in plates}, (), relaxed=True)
-    stars = {q: _stars(assembly.parts[q]) for q in plates}
-    ways = {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0]) for q in plates}
+    stars, ways = _cuts(assembly, plates, paths)
     helds = [c for r in range(len(ground) + 1) for c in combinations(ground, r)]
     found, refusal = _first(layered, lambda: _splits(stars), helds, MAX_SEARCHES, spent=1)
     if found is None:  # then cut along the plates' own links too, with a budget of its own
@@ -112,8 +111,7 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
     the stubs from base and cover hold the ground pins."""
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
-    stars = {q: _stars(assembly.parts[q]) for q in plates}
-    ways = {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0]) for q in plates}
+    _, ways = _cuts(assembly, plates, paths)
     crank, motor = assembly.crank.child, assembly.crank.joint
     for split in islice((s for s in _splits(ways) if s), MAX_SPLIT_STRAPS):
         keep = _kept(roles, split, [])
@@ -136,6 +134,13 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
                       for strap in layout.straps]  # fmt: skip
             return replace(real, straps=tuple(straps))
     raise NoFlatLayers("no split plates tried layer with straps")
+
+
+def _cuts(assembly: Assembly, plates: list[int], paths: np.ndarray) -> tuple[dict, dict]:
+    """Each plate's ways to be cut: the stars, and the stars then the trees of its own links."""
+    stars = {q: _stars(assembly.parts[q]) for q in plates}
+    return stars, {q: stars[q] + _own_trees(assembly.parts[q], stars[q], paths[:, 0])
+                   for q in plates}  # fmt: skip
 
 
 def _kept(roles: list[tuple], split: dict[int, tuple], brackets: list[int]) -> list[int]:

@@ -63,8 +63,9 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     straps = {(strap.part, strap.arm): strap for strap in layout.straps}
     for strap in layout.straps:
         through = (assembly.pins[k].joint for k in strap.passing)
-        layer = next((arm.layer for arm in layout.arms.get(strap.part, ())
-                      if arm.joints == strap.arm), int(layout.layers[strap.part]))  # fmt: skip
+        layer = int(layout.layers[strap.part])
+        if strap.arm:  # an arm's strap: on that arm's layer
+            layer = layout.arms[strap.part][_strap_arm(layout, strap)].layer
         out.append(Plate(sheave_name(assembly, layout, strap), strap.sheave_of,
                          (strap.joint, *through), layer, sheave=strap.radius))  # fmt: skip
     for p, part in enumerate(assembly.parts[1:], start=1):
@@ -101,8 +102,12 @@ def sheave_name(assembly: Assembly, layout: Layout, strap: Strap) -> str:
     """The sheave's plate and body: named after the strap that turns on it (its part, or its
     arm's plate)."""
     name = assembly.parts[strap.part].name
-    arms = [arm.joints for arm in layout.arms.get(strap.part, ())]
-    return f"{name}_arm{arms.index(strap.arm)}_sheave" if strap.arm else f"{name}_sheave"
+    return f"{name}_arm{_strap_arm(layout, strap)}_sheave" if strap.arm else f"{name}_sheave"
+
+
+def _strap_arm(layout: Layout, strap: Strap) -> int:
+    """The index among its part's arms of the arm a strap is (where `strap.arm` is set)."""
+    return [arm.joints for arm in layout.arms.get(strap.part, ())].index(strap.arm)
 
 
 def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:
