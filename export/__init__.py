@@ -11,7 +11,8 @@ sheaves as eccentric straps, `strapped`, then plates are cut into arms and groun
 held by brackets or as two stubs from base and cover, `braced`, and failing that a part forks,
 or several do, `forked`, then the parts at the motor's pivot turn on turntables, with forks
 or straps beside them, `turntable`, then several links may be straps at once, beside a
-turntable or not, and last plates are cut into arms beside straps, `braced`), plates
+turntable or not, then plates are cut into arms beside straps, `braced`, and last the
+motor's shaft is cut too, the crank's two halves turned as one from a layshaft, `drive`), plates
 become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop
 closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
@@ -31,8 +32,9 @@ from linkd.scale import MECHANISM_RANGE_M, size_problem
 from linkd.topology import Status
 from linkd.validator import validate_mechanism
 
-from .braced import braced_layers, split_straps_layers
+from .braced import braced_layers, cut_crank_layers, split_straps_layers
 from .described import describe_parts
+from .drive import drive
 from .forked import forked_layers
 from .framed import framed_layers, modular
 from .layers import Layout, assign_layers, find_conflicts, sweep
@@ -65,7 +67,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  turntable_layers: "turntables at the motor's pivot",
                  several_straps_layers: "several eccentric straps at once",
                  turntable_core_layers: "a turntable with several straps",
-                 split_straps_layers: "split plates with straps"}  # fmt: skip
+                 split_straps_layers: "split plates with straps",
+                 cut_crank_layers: "a crank cut in two, driven from a layshaft"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -73,7 +76,8 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # Costly searches: after the usual width they are tried at the narrowest, where every size is
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
 # search finds none there, the widths between are not tried.
-SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers})
+SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers,
+                      cut_crank_layers})  # fmt: skip
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -89,6 +93,7 @@ class ExportResult:
     narrowed: float = 1.0  # link width over the usual one: below 1 where no wider one layered
     crank: str = ""  # the crank's part name
     turntables: tuple[str, ...] = ()  # the parts at the motor's pivot on turntables
+    drive: str = ""  # the layshaft's name where the crank is cut in two and driven from it
 
     @property
     def turntable(self) -> str | None:
@@ -130,25 +135,29 @@ def export_mechanism(
     options = options or ExportOptions()
     sizes, layout = _layered(mech, assembly, options, progress=say)
     narrowed = sizes.link_width / resolve_sizes(mech, assembly.parts, options).link_width
+    shapes, assembly, layout = drive(mech, assembly, layout, sizes, sweep(mech, sizes.link_width))
     say(f"writing {layout.count} layers of parts")
     files: list[Path] = []
     meshes, wholes, volumes = {}, {}, {}
     if "stl" in formats:
-        meshes, wholes, volumes = _write_meshes(mech, assembly, layout, sizes, out_dir)
+        meshes, wholes, volumes = _write_meshes(shapes, assembly, layout, sizes, out_dir)
     files += [Path(path) for path in {*meshes.values(), *wholes.values()}]
     if "mjcf" in formats:
-        sizes = _write_model(mech, assembly, layout, sizes, meshes, volumes, out_dir)
+        sizes = _write_model(mech, shapes, assembly, layout, sizes, meshes, volumes, out_dir)
         files += [Path(MODEL), Path(SCENE)]
     parts = describe_parts(assembly, layout, sizes, wholes, meshes)
-    mech.replace(extra={**mech.extra, "layers": layout.count, "parts": parts}).save(
-        out_dir / "mechanism.json"
-    )
+    extra = {key: value for key, value in mech.extra.items() if key != "drive"}
+    extra |= {"layers": layout.count, "parts": parts}
+    if layout.drive:
+        extra["drive"] = layout.drive.describe()
+    mech.replace(extra=extra).save(out_dir / "mechanism.json")
     files.append(Path("mechanism.json"))
     names = [part.name for part in assembly.parts]
     return ExportResult(layout.count, parts, sorted(files), time.perf_counter() - start,
                         sizes.to_dict(), layout.min_gap, layout.minimal, narrowed,
                         names[assembly.crank.child],
-                        tuple(names[table.part] for table in layout.turntables))  # fmt: skip
+                        tuple(names[table.part] for table in layout.turntables),
+                        names[layout.drive.layshaft] if layout.drive else "")  # fmt: skip
 
 
 def _layered(
@@ -168,8 +177,9 @@ def _layered(
     cut into arms and ground pins are held by brackets or as stubs from both plates
     (`braced`, unless `options.brackets` is off), then a part forks, then the parts at the
     motor's pivot turn on turntables (`turntable`); then several parts at once may be straps,
-    then as many beside the crank on a turntable, and last plates are cut into arms beside
-    straps (`braced`); the forks, the turntables and both splits are SCREENED.
+    then as many beside the crank on a turntable, then plates are cut into arms beside straps
+    (`braced`), and last the motor's shaft may be cut too (the crank in two halves, `drive`);
+    the forks, the turntables and the splits are SCREENED.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -187,7 +197,7 @@ def _layered(
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
-                      turntable_core_layers, split_straps_layers]  # fmt: skip
+                      turntable_core_layers, split_straps_layers, cut_crank_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:
@@ -261,7 +271,8 @@ def _write_meshes(
         points = (plate_points(mech, plate) - origins[plate.part]) * unit
         whole[plate.name] = f"{MESHES}/{plate.name}.stl"
         if plate.sheave:  # the model's sheave is a cylinder, like a pin
-            sheave = disc_mesh(points, plate.sheave * unit, *size[1:], True)
+            pinned = layout.drive is None or plate.joints[0] < layout.drive.first  # a pin there
+            sheave = disc_mesh(points, plate.sheave * unit, *size[1:], pinned)
             write_stl(out_dir / whole[plate.name], sheave, plate.name)
             continue
         if plate.disc and not plate.bore:  # a turntable's: a plate whose hull is the disc
@@ -299,6 +310,7 @@ def _write_meshes(
 
 def _write_model(
     mech: Mechanism,
+    shapes: Mechanism,
     assembly: Assembly,
     layout: Layout,
     sizes: Sizes,
@@ -309,19 +321,19 @@ def _write_model(
     """mechanism.xml, with the model's mesh paths and volumes from `_write_meshes`, compiled
     to weigh its parts and to size the crank servo from its own inertia; returns the sizes with
     the density used, raised where MuJoCo's mass floors would distort a millimetre-sized model
-    (`density_scale`)."""
+    (`density_scale`). `shapes`: the mechanism with the drive's points, where there is one."""
     import mujoco
 
     path = out / MODEL
 
     def compiled(s: Sizes) -> mujoco.MjModel:
-        path.write_text(build_mjcf(mech, assembly, layout, s, meshes, volumes=volumes))
+        path.write_text(build_mjcf(shapes, assembly, layout, s, meshes, volumes=volumes))
         return mujoco.MjModel.from_xml_path(str(path))
 
     scale = density_scale(compiled(replace(sizes, density=sizes.density * PROBE_DENSITY)))
     sizes = replace(sizes, density=sizes.density * scale)
-    servo = servo_gains(compiled(sizes), mech)
-    path.write_text(build_mjcf(mech, assembly, layout, sizes, meshes, servo, volumes))
+    servo = servo_gains(compiled(sizes), mech, layout.drive)
+    path.write_text(build_mjcf(shapes, assembly, layout, sizes, meshes, servo, volumes))
     (out / SCENE).write_text(build_scene(mech, layout, sizes, MODEL))
     return sizes
 

@@ -35,7 +35,10 @@ Last of all the constructions, split plates and eccentric straps (`strapped`) ar
 together (`split_straps_layers`): in a few mechanisms a plate must be cut so that its arms lie
 on both sides of a part, and a link must turn on a sheave so that a pin may cross its layer,
 and neither alone layers. Each split, fewest first, gets the straps' own search, with no
-bracket; an arm may be a strap too (bored round the sheave at one of its joints).
+bracket; an arm may be a strap too (bored round the sheave at one of its joints). And where
+that fails, the same with the motor's shaft cut into stubs as well (`cut_crank_layers`): the
+crank's arms then lie on both sides of the parts passing over its pivot, its two halves driven
+as one from outside the stack (`drive`).
 """
 
 from __future__ import annotations
@@ -109,6 +112,17 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
     splits, stars and cuts along the plates' own links, the fewest split plates first, layers
     with one strap or two, or round a core of them: `strapped.strap_search`). No bracket:
     the stubs from base and cover hold the ground pins."""
+    return _split_straps(assembly, paths, sizes, cut=False)
+
+
+def cut_crank_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """`split_straps_layers` with the motor's shaft, too, cut into stubs from base and cover,
+    the crank's arms on both (its two halves turned as one from outside the stack, `drive`)."""
+    return _split_straps(assembly, paths, sizes, cut=True)
+
+
+def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool) -> Layout:
+    """split_straps_layers; cut: the motor's shaft need not stay whole."""
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     _, ways = _cuts(assembly, plates, paths)
@@ -120,10 +134,10 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
         driven = next(k for k, role in enumerate(kept)  # the crank, or its arm at the motor
                       if role[1] == crank and motor in chosen.parts[k].joints)  # fmt: skip
         chosen = replace(chosen, hinges=[replace(assembly.crank, child=driven)])
+        shafts = [k for k in _shafts(chosen, kept) if not (cut and chosen.pins[k].joint == motor)]
         for core in (False, True):
             try:
-                layout = strap_search(chosen, share, paths, sizes, core=core,
-                                      shafts=_shafts(chosen, kept))  # fmt: skip
+                layout = strap_search(chosen, share, paths, sizes, core=core, shafts=shafts)
             except NoFlatLayers:
                 continue
             if any(k >= len(assembly.pins) for strap in layout.straps for k in strap.passing):

@@ -20,7 +20,7 @@ def describe_parts(
     for plate in plates(assembly, layout):
         entry = {"name": plate.name, "kind": assembly.parts[plate.part].kind,
                  "joints": list(plate.joints), "layer": plate.layer}  # fmt: skip
-        if plate.part in layout.arms:
+        if plate.part in layout.arms and not plate.sheave:
             entry["arm_of"] = assembly.parts[plate.part].name
         if plate.posts:
             entry["posts"] = [list(point) for point in plate.posts]
@@ -54,6 +54,8 @@ def describe_parts(
         }  # fmt: skip
         if rod.joint in fixed:
             entry["fixed_in"] = assembly.parts[fixed[rod.joint]].name
+        elif rod.hub and 0 in rod.members:  # a shaft turning in the ground's plates (`drive`)
+            entry["fixed_in"] = assembly.parts[rod.hub].name
         out.append(entry)
     for shaft in layout.shafts:
         lo, hi = shaft.span

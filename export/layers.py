@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from itertools import combinations, pairwise
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from .options import Sizes
 from .parts import Assembly, joint_paths
 from .planar import convex_hull, cross, least_distances, to_segment
 from .stacking import PinState, fewest_layers, find_order, stack_in_order
+
+if TYPE_CHECKING:
+    from .drive import Drive
 
 SWEEP_ANGLES = 720  # crank angles of a first sweep
 MAX_SWEEP_ANGLES = 8192
@@ -131,6 +134,7 @@ class Layout:
     frames: tuple[int, ...] = ()  # layers of ground plates between modules (`framed`)
     frame_posts: tuple[tuple[float, float], ...] = ()  # posts holding them, base to cover
     turntables: tuple[Turntable, ...] = ()  # parts at the motor's pivot on turntables
+    drive: Drive | None = None  # the crank cut in two, its halves driven from a layshaft
 
 
 @dataclass(frozen=True)

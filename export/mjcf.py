@@ -42,6 +42,8 @@ from .rods import pin_rods
 if TYPE_CHECKING:
     import mujoco
 
+    from .drive import Drive
+
 TIMESTEP = 2.5e-4  # s, the default
 CCD_TOLERANCE = 1e-6  # m, MuJoCo's own for the distance between convex meshes
 CCD_SHARE = 0.01  # of the least gap between parts: the tolerance where that is finer, as a
@@ -316,9 +318,14 @@ def density_scale(probe: mujoco.MjModel) -> float:
     floors: raised to them, every light part would weigh the same and turn like a flywheel, and
     the loops would need a step tens of times finer. Scaling every mass alike changes no motion
     (the mechanism moves in the plane, gravity along z, and the servo is sized from the model)."""
-    moving = probe.body_dofnum > 0
-    mass = probe.body_mass[moving].min() / PROBE_DENSITY
-    inertia = probe.body_inertia[moving].min() / PROBE_DENSITY
+    moving = np.flatnonzero(probe.body_dofnum > 0)
+    bare = [b for b in moving if probe.body_mass[b] == 0]  # a layshaft: its mass is in its shaft
+    groups = [probe.body_weldid == b for b in bare]  # and sheaves, welded to it
+    masses = [*probe.body_mass[moving], *(probe.body_mass[g].sum() for g in groups)]
+    inertias = [*probe.body_inertia[moving].min(1), *(probe.body_inertia[g].sum(0).min()
+                                                      for g in groups)]  # fmt: skip
+    mass = min(m for m in masses if m > 0) / PROBE_DENSITY
+    inertia = min(i for i in inertias if i > 0) / PROBE_DENSITY
     need = FLOOR_MARGIN * max(MIN_MASS / mass, MIN_INERTIA / inertia)
     return float(10 ** np.ceil(np.log10(need))) if need > 1 else 1.0
 
@@ -344,6 +351,7 @@ def build_scene(mech: Mechanism, layout: Layout, sizes: Sizes, model_file: str) 
     centre = mech.positions.mean(0) * unit
     extent = 3 * mech.scale * unit
     height = (layout.count * sizes.pitch) * unit
+    lowest = min(0, layout.drive.layers[0]) if layout.drive else 0  # the drive's under the base
     root = ET.Element("mujoco", model="linkd mechanism scene")
     ET.SubElement(root, "include", file=model_file)
     ET.SubElement(root, "statistic", center=_fmt(*centre, height / 2), extent=_fmt(extent))
@@ -360,20 +368,24 @@ def build_scene(mech: Mechanism, layout: Layout, sizes: Sizes, model_file: str) 
                   directional="true")  # fmt: skip
     ET.SubElement(worldbody, "geom", name="floor", type="plane", material="grid",
                   size=_fmt(0, 0, extent / 10),
-                  pos=_fmt(*centre, -sizes.layer_gap * unit))  # fmt: skip
+                  pos=_fmt(*centre, (lowest * sizes.pitch - sizes.layer_gap) * unit))  # fmt: skip
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
 
 
-def qpos_at(model, mech: Mechanism, angles: np.ndarray) -> np.ndarray:
-    """(T, nq) joint positions of the exported model at crank angles (analytic kinematics)."""
+def qpos_at(model, mech: Mechanism, angles: np.ndarray, drive: Drive | None = None) -> np.ndarray:
+    """(T, nq) joint positions of the exported model at crank angles (analytic kinematics), the
+    `drive`'s hinges too where the crank is cut in two."""
     qpos = np.tile(model.qpos0, (len(angles), 1))
-    for name, values in hinge_angles(mech, angles).items():
+    turns = hinge_angles(mech, angles) | (drive.hinge_angles(angles) if drive else {})
+    for name, values in turns.items():
         qpos[:, model.joint(name).qposadr[0]] = values
     return qpos
 
 
-def servo_gains(model: mujoco.MjModel, mech: Mechanism, n_angles: int = 64) -> Servo:
+def servo_gains(
+    model: mujoco.MjModel, mech: Mechanism, drive: Drive | None = None, n_angles: int = 64
+) -> Servo:
     """Crank servo and rotor inertia from the largest inertia the crank drives in a revolution.
 
     That inertia is max v' M v over the cycle, v being the joint velocities per unit crank
@@ -386,12 +398,12 @@ def servo_gains(model: mujoco.MjModel, mech: Mechanism, n_angles: int = 64) -> S
 
     angles = np.linspace(0, 2 * np.pi, n_angles, endpoint=False)
     h = 1e-6
-    turn = qpos_at(model, mech, angles + h) - qpos_at(model, mech, angles - h)
+    turn = qpos_at(model, mech, angles + h, drive) - qpos_at(model, mech, angles - h, drive)
     v = np.angle(np.exp(1j * turn)) / (2 * h)  # every joint is a hinge: differences wrap
     data = mujoco.MjData(model)
     mass = np.zeros((model.nv, model.nv))
     inertia = 0.0
-    for q, dq in zip(qpos_at(model, mech, angles), v):
+    for q, dq in zip(qpos_at(model, mech, angles, drive), v):
         data.qpos[:] = q
         mujoco.mj_forward(model, data)
         mujoco.mj_fullM(model, data, mass)

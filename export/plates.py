@@ -1,7 +1,8 @@
 """The solid plates of a layered assembly: what is cut, meshed and modelled, part by part.
 
-The ground is a base plate under the stack, maybe a cover over it, brackets inside it, frames
-between modules and turntables' rings; each moving part is one plate (a disc or a ring on a
+The ground is a base plate under the stack, maybe a cover over it (both holding a layshaft
+where the crank is driven from one, `drive`), brackets inside it, frames between modules and
+turntables' rings; each moving part is one plate (a disc or a ring on a
 turntable), or one per arm where it is split, and a strap's part has a sheave besides.
 """
 
@@ -49,6 +50,9 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     if layout.frames:  # each ground plate holds the rods that end in it or pass it
         ends = [(rod.joint, rod.span) for rod in pin_rods(assembly, layout) if 0 in rod.members]
         base, cover = _held(ends, 0), _held(ends, layout.count - 1)
+    if layout.drive:  # the layshaft turns in both
+        shaft = (layout.drive.first,)
+        base, cover = base + shaft, cover + shaft
     out = [Plate(ground.name, 0, base, 0, posts=low)] if base or low else []
     if cover or high:
         out.append(Plate(f"{ground.name}_cover", 0, cover, layout.count - 1, posts=high))

@@ -32,7 +32,8 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
     where a part forks (`forks`) is coaxial rods fixed in the forked part, `<name>a`,
     `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20). A
     part on a turntable is on no pin at the motor's pivot: that pin is only there where other
-    parts turn on it."""
+    parts turn on it. Where the crank is cut in two (`drive`), the motor's stubs are fixed in
+    its halves and turn in the base and the cover."""
     rods = []
     tabled = {table.part for table in layout.turntables}
     pivot = layout.turntables[0].joint if tabled else None
@@ -52,10 +53,12 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
             rods.append(Rod(pin.name, pin.joint, pin.hub, pin.members, layout.pin_spans[k]))
             continue
         stubs = {pin.name: layout.pin_spans[k], f"{pin.name}_top": layout.cover_stubs[k]}
-        for name, (lo, hi) in stubs.items():
+        driven = layout.drive is not None and k == layout.drive.pin
+        hubs = (assembly.crank.child, layout.drive.upper) if driven else (pin.hub, pin.hub)
+        for hub, (name, (lo, hi)) in zip(hubs, stubs.items()):
             inside = [m for m in pin.members if lo <= _layer_at(layout, m, pin.joint) <= hi]
-            members = tuple(m for m in pin.members if m == pin.hub or m in inside)
-            rods.append(Rod(name, pin.joint, pin.hub, members, (lo, hi)))
+            members = tuple(m for m in pin.members if m in (hub, 0) or m in inside)
+            rods.append(Rod(name, pin.joint, hub, members, (lo, hi)))
     return rods
 
 

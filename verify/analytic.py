@@ -16,7 +16,8 @@ from linkd.validator import validate_mechanism
 
 
 def joint_paths(mech: Mechanism, angles: int | np.ndarray) -> np.ndarray:
-    """(N, T, 2) joint positions at the crank angles (a count T, or radians from the assembly pose).
+    """(N, T, 2) joint positions at the crank angles (a count T, or radians from the assembly pose);
+    where the crank is cut in two and driven (mechanism.json's `drive`), its points after them.
 
     Raises ValueError with the validator's reason when the mechanism is not a working one.
     """
@@ -31,7 +32,25 @@ def joint_paths(mech: Mechanism, angles: int | np.ndarray) -> np.ndarray:
     motion = trace(batch.positions, plan, angles)
     paths = np.empty((mech.n_nodes, motion.x.shape[-1], 2))
     paths[order] = np.stack([motion.x[0], motion.y[0]], -1)
-    return paths
+    if "drive" not in mech.extra:
+        return paths
+    turns = 2 * np.pi * np.arange(angles) / angles if isinstance(angles, int) else angles
+    return np.concatenate([paths, drive_paths(mech.extra["drive"], turns)])
+
+
+def drive_paths(drive: dict, angles: np.ndarray) -> np.ndarray:
+    """(K, T, 2) paths of the points of a crank cut in two and its drive (mechanism.json's
+    `drive`, joints N, N + 1, ...): each turns with the crank about its centre."""
+    points, centres = np.array(drive["points"], float), np.array(drive["centres"], float)
+    c, s = np.cos(angles), np.sin(angles)
+    x, y = (points - centres).T[:, :, None]
+    return centres[:, None] + np.stack([c * x - s * y, s * x + c * y], -1)
+
+
+def all_positions(mech: Mechanism) -> np.ndarray:
+    """The joints in the assembly pose, a drive's points after them."""
+    extra = mech.extra.get("drive", {}).get("points", [])
+    return np.concatenate([mech.positions, np.reshape(np.array(extra, float), (-1, 2))])
 
 
 def rigid_parts(mech: Mechanism) -> list[tuple[int, ...]]:

@@ -23,7 +23,7 @@ import numpy as np
 from linkd.mechanism import UNITS_IN_METRES, Mechanism
 from linkd.outdir import write_atomic
 
-from .analytic import joint_paths, rigid_parts
+from .analytic import all_positions, joint_paths, rigid_parts
 from .screen import screen_polyline
 
 FRAMES = 120  # animation keyframes per revolution
@@ -109,12 +109,13 @@ def parts_from_model(xml_path: str | Path, mech: Mechanism) -> list[Part]:
     unit = UNITS_IN_METRES[mech.units]
     weld = model.body_weldid[model.geom_bodyid]
     pins = pin_points(model, data)
+    positions = all_positions(mech)
     fixed = tuple(int(k) for k in np.flatnonzero(mech.fixed))
     parts = []
     for body in np.unique(weld):
         geoms = np.flatnonzero(weld == body)
         anchors = pins.get(int(body), np.zeros((0, 2))) / unit
-        nearest = np.linalg.norm(anchors[:, None] - mech.positions, axis=-1).argmin(1)
+        nearest = np.linalg.norm(anchors[:, None] - positions, axis=-1).argmin(1)
         joints = fixed if body == 0 else tuple(dict.fromkeys(int(k) for k in nearest))
         shapes = [s for s in (_geom_surface(model, data, g) for g in geoms) if s is not None]
         if not shapes or (body and len(joints) < 2):

@@ -3,8 +3,9 @@
 The physics checks follow joints and sites, not the parts' shapes: a model edited so that a
 plate sits off its joints, or is scaled short of them, still moves exactly as mechanism.json
 says. Here each pin point of a moving part (a hinge or loop-closure anchor) must lie inside the
-outline of the part's own geoms (the plates on its body, not the pins and sheaves welded to it),
-at least a pin's radius in from its edge, where a hole round the pin leaves a wall.
+outline of the part's own geoms (the plates on its body and the sheaves welded to it, not its
+pins), at least a pin's radius in from its edge, where a hole round the pin leaves a wall (a
+sheave centred there is no pin: an eccentric's centre needs no wall).
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from scipy.spatial import ConvexHull, QhullError
 from .pose import pin_points
 
 CIRCLE = 32  # points of a cylinder's outline
+SHEAVE = "_sheave"  # a sheave's name ends so: a disc a strap turns on, not a pin in a hole (an
+# eccentric's centre, where a drive's rod turns, has no pin)
 ROUNDING = 1e-9  # relative allowance, times the model's extent
 
 
@@ -25,14 +28,17 @@ def unheld_pins(model: Any, data: Any) -> list[str]:
     """A line for each pin point a moving part's own outline does not hold (at `data`'s pose)."""
     pins = pin_points(model, data)
     kinds = np.asarray(model.geom_type)
-    cylinders = np.flatnonzero(kinds == mujoco.mjtGeom.mjGEOM_CYLINDER)
+    cylinders = [g for g in np.flatnonzero(kinds == mujoco.mjtGeom.mjGEOM_CYLINDER)
+                 if not _sheave(model, g)]  # fmt: skip
+    weld = np.asarray(model.body_weldid)[model.geom_bodyid]
     centres = data.geom_xpos[cylinders, :2]
     extent = float(np.abs(data.geom_xpos[:, :2]).max(initial=1.0))
     problems = []
     for body, points in sorted(pins.items()):
         if body == 0:
             continue  # the ground: its pins stand in the base, the cover or brackets
-        own = np.flatnonzero(np.asarray(model.geom_bodyid) == body)
+        own = [g for g in np.flatnonzero(weld == body)
+               if model.geom_bodyid[g] == body or _sheave(model, g)]  # fmt: skip
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or f"body {body}"
         if len(own) == 0:
             problems.append(f"part {name} has no geom of its own to hold its pins")
@@ -53,6 +59,11 @@ def unheld_pins(model: Any, data: Any) -> list[str]:
                                 f"{max(depth, 0):.3g} m inside its outline, a pin's radius "
                                 f"({need:.3g} m) needed")  # fmt: skip
     return problems
+
+
+def _sheave(model: Any, geom: int) -> bool:
+    """Whether a geom is a sheave (by its name): a disc a strap turns on, not a pin."""
+    return (model.geom(geom).name or "").endswith(SHEAVE)
 
 
 def _outline(model: Any, data: Any, geom: int) -> np.ndarray:

@@ -259,6 +259,8 @@ def export(args: argparse.Namespace) -> int:
             outcome["  of which on a bracket"] += 1
         if report.passed and any(pin["name"].endswith("_top") for pin in pins):
             outcome["  of which on ground stubs"] += 1  # a pin and a stub at one joint
+        if report.passed and result.drive:
+            outcome["  of which with the crank cut in two"] += 1
         if report.passed and report.check("dynamics").figures["timestep_s"] < TIMESTEP:
             outcome["  of which with a finer step"] += 1
         failed.update(report.failed)
@@ -270,7 +272,7 @@ def export(args: argparse.Namespace) -> int:
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
                  "    several parts at once", "  of which on turntables",
-                 "  of which on ground stubs",
+                 "  of which on ground stubs", "  of which with the crank cut in two",
                  "  of which with a finer step", "failed verification",
                  "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:

@@ -124,6 +124,11 @@ def run(args: argparse.Namespace) -> int:
     turned = f"; the crank ({disc}) on a turntable: drive it at its rim" if disc else ""
     if result.rings:
         turned += f"; {', '.join(result.rings)} on turntables round the motor's pivot"
+    if result.drive:
+        turned += (
+            f"; the crank cut in two at the motor's shaft, its halves turned as one by "
+            f"{result.drive} and two rods under the base and two over the cover"
+        )
     print(f"{out}: {result.layers} layers; parts: {kinds}{narrower}{turned}; "
           f"exported in {result.seconds:.2f} s")  # fmt: skip
     if verification:
