@@ -1,7 +1,7 @@
 """The crank cut in two at the motor's shaft, its halves turned as one by a layshaft outside.
 
 In a few mechanisms the parts passing over the motor's pivot must lie between the crank's arms:
-no whole shaft there keeps clear of them (`braced.split_straps_layers` asks for this last). The
+no whole shaft there keeps clear of them (`braced.cut_crank_layers` finds these, last). The
 motor's shaft is then cut into two stubs, as a ground pin's may be: the base stub carries the
 crank's arms below the passing parts, the cover stub those above, each stub turning in its
 plate. The two halves are two parts, each on a hinge of its own, and nothing inside the stack
@@ -64,7 +64,7 @@ class Drive:
                 "centres": [list(c) for c in self.centres]}  # fmt: skip
 
 
-def split_crank(assembly: Assembly, layout: Layout) -> tuple[list[Arm], list[Arm]] | None:
+def _halves(assembly: Assembly, layout: Layout) -> tuple[list[Arm], list[Arm]] | None:
     """The crank's arms on the base stub and on the cover stub, where the motor's shaft is cut
     and no arm joins the two halves elsewhere; None where one rigid crank is left."""
     crank, pivot = assembly.crank.child, assembly.crank.joint
@@ -100,8 +100,8 @@ def drive(
 ) -> tuple[Mechanism, Assembly, Layout]:
     """The mechanism with the drive's points appended (for its parts' shapes only), and the
     assembly and layout with the crank cut in two and the drive's parts added; all unchanged
-    where the crank is one rigid part (`split_crank`). `paths` (N, T, 2): the joints' sweep."""
-    halves = split_crank(assembly, layout)
+    where the crank is one rigid part (`_halves`). `paths` (N, T, 2): the joints' sweep."""
+    halves = _halves(assembly, layout)
     if halves is None:
         return mech, assembly, layout
     lower, upper = halves

@@ -318,14 +318,11 @@ def density_scale(probe: mujoco.MjModel) -> float:
     floors: raised to them, every light part would weigh the same and turn like a flywheel, and
     the loops would need a step tens of times finer. Scaling every mass alike changes no motion
     (the mechanism moves in the plane, gravity along z, and the servo is sized from the model)."""
-    moving = np.flatnonzero(probe.body_dofnum > 0)
-    bare = [b for b in moving if probe.body_mass[b] == 0]  # a layshaft: its mass is in its shaft
-    groups = [probe.body_weldid == b for b in bare]  # and sheaves, welded to it
-    masses = [*probe.body_mass[moving], *(probe.body_mass[g].sum() for g in groups)]
-    inertias = [*probe.body_inertia[moving].min(1), *(probe.body_inertia[g].sum(0).min()
-                                                      for g in groups)]  # fmt: skip
-    mass = min(m for m in masses if m > 0) / PROBE_DENSITY
-    inertia = min(i for i in inertias if i > 0) / PROBE_DENSITY
+    # a moving body with no geom of its own (a layshaft) weighs with its welded shaft and sheaves
+    weld, bare = probe.body_weldid, probe.body_geomnum == 0
+    groups = [weld == b if bare[b] else [b] for b in np.flatnonzero(probe.body_dofnum > 0)]
+    mass = min(probe.body_mass[g].sum() for g in groups) / PROBE_DENSITY
+    inertia = min(probe.body_inertia[g].sum(0).min() for g in groups) / PROBE_DENSITY
     need = FLOOR_MARGIN * max(MIN_MASS / mass, MIN_INERTIA / inertia)
     return float(10 ** np.ceil(np.log10(need))) if need > 1 else 1.0
 
