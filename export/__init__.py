@@ -44,15 +44,14 @@ from .mjcf import (
     build_mjcf,
     build_scene,
     density_scale,
-    qpos_at,
     retimed,
-    servo_gains,
 )
 from .options import ExportOptions, Sizes, resolve_sizes
 from .parts import Assembly, assemble, hinge_angles, joint_paths, part_origins
 from .plates import plate_points, plates
 from .refusal import why_refused
 from .routing import bent_layers
+from .servo import qpos_at, servo_gains
 from .strapped import several_straps_layers, strapped_layers
 from .turntable import turntable_core_layers, turntable_layers
 

@@ -17,7 +17,7 @@ stay within 5e-7 of their shortest link (median 3e-8), in half the simulated ste
 that still misses the tolerances at that step is written again with a finer one (`retimed`; the
 step is chosen by `linkd.verified`). The crank servo is critically damped at 10 Hz for the largest
 inertia the crank drives, and the crank hinge carries a rotor inertia of that size: without it
-a light crank's own mode under the servo is too fast for RK4 (see `servo_gains`). The Newton
+a light crank's own mode under the servo is too fast for RK4 (see `servo.servo_gains`). The Newton
 solver with a tight tolerance converges in a few iterations.
 """
 
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import itertools
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -34,15 +33,14 @@ from linkd.mechanism import UNITS_IN_METRES, Mechanism
 
 from .layers import Layout
 from .options import Sizes
-from .parts import CRANK, Assembly, hinge_angles, part_origins
+from .parts import CRANK, Assembly, part_origins
 from .planar import convex_hull
 from .plates import Plate, plate_points, plates, posts, sheave_name
 from .rods import pin_rods
+from .servo import UNSIZED, Servo
 
 if TYPE_CHECKING:
     import mujoco
-
-    from .drive import Drive
 
 TIMESTEP = 2.5e-4  # s, the default
 CCD_TOLERANCE = 1e-6  # m, MuJoCo's own for the distance between convex meshes
@@ -50,7 +48,6 @@ CCD_SHARE = 0.01  # of the least gap between parts: the tolerance where that is 
 # sub-millimetre mechanism's gaps (microns) come near MuJoCo's own, which then finds contacts
 # between parts that do not touch
 SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
-SERVO_HZ = 10.0  # natural frequency of the crank servo at the crank's largest inertia
 MIN_MASS, MIN_INERTIA = 1e-9, 1e-14  # kg, kg m^2: floors that only millimetre-sized designs reach
 FLOOR_MARGIN = 10.0  # a model's lightest moving body stays this far above both floors
 PROBE_DENSITY = 1e12  # times the density: a model at which no body of any buildable size is floored
@@ -59,15 +56,6 @@ SMALL_MESH = 1e-14  # m^3: MuJoCo refuses a mesh's exact inertia under 1e-15 (mj
 SITE_RADIUS = 0.15  # of the link width
 LAYER_COLOURS = [(0.55, 0.55, 0.55), (0.85, 0.45, 0.2), (0.2, 0.55, 0.8), (0.35, 0.7, 0.35),
                  (0.8, 0.7, 0.2), (0.6, 0.4, 0.75), (0.3, 0.7, 0.7), (0.8, 0.35, 0.5)]  # fmt: skip
-
-
-@dataclass(frozen=True)
-class Servo:
-    """The crank's position servo and the motor's rotor inertia (armature) on the crank hinge."""
-
-    kp: float  # N m / rad
-    kv: float  # N m s / rad
-    armature: float  # kg m^2
 
 
 def _fmt(*values: float) -> str:
@@ -251,7 +239,7 @@ def build_mjcf(
     layout: Layout,
     sizes: Sizes,
     meshes: dict[str, str] | None = None,
-    servo: Servo = Servo(1.0, 0.1, 0.0),
+    servo: Servo = UNSIZED,
     volumes: dict[str, float] | None = None,
 ) -> str:
     """The model as MJCF text. `meshes` maps part names to STL paths relative to the model file;
@@ -368,42 +356,3 @@ def build_scene(mech: Mechanism, layout: Layout, sizes: Sizes, model_file: str) 
                   pos=_fmt(*centre, (lowest * sizes.pitch - sizes.layer_gap) * unit))  # fmt: skip
     ET.indent(root)
     return ET.tostring(root, encoding="unicode") + "\n"
-
-
-def qpos_at(model, mech: Mechanism, angles: np.ndarray, drive: Drive | None = None) -> np.ndarray:
-    """(T, nq) joint positions of the exported model at crank angles (analytic kinematics), the
-    `drive`'s hinges too where the crank is cut in two."""
-    qpos = np.tile(model.qpos0, (len(angles), 1))
-    turns = hinge_angles(mech, angles) | (drive.hinge_angles(angles) if drive else {})
-    for name, values in turns.items():
-        qpos[:, model.joint(name).qposadr[0]] = values
-    return qpos
-
-
-def servo_gains(
-    model: mujoco.MjModel, mech: Mechanism, drive: Drive | None = None, n_angles: int = 64
-) -> Servo:
-    """Crank servo and rotor inertia from the largest inertia the crank drives in a revolution.
-
-    That inertia is max v' M v over the cycle, v being the joint velocities per unit crank
-    speed (central differences of the analytic pose). A rotor of the same inertia keeps the
-    crank hinge from being the lightest thing in the model, whose own mode under the servo
-    would otherwise be too fast for an explicit integrator; the servo is then critically damped
-    at SERVO_HZ for mechanism plus rotor at their heaviest.
-    """
-    import mujoco
-
-    angles = np.linspace(0, 2 * np.pi, n_angles, endpoint=False)
-    h = 1e-6
-    turn = qpos_at(model, mech, angles + h, drive) - qpos_at(model, mech, angles - h, drive)
-    v = np.angle(np.exp(1j * turn)) / (2 * h)  # every joint is a hinge: differences wrap
-    data = mujoco.MjData(model)
-    mass = np.zeros((model.nv, model.nv))
-    inertia = 0.0
-    for q, dq in zip(qpos_at(model, mech, angles, drive), v):
-        data.qpos[:] = q
-        mujoco.mj_forward(model, data)
-        mujoco.mj_fullM(model, data, mass)
-        inertia = max(inertia, float(dq @ mass @ dq))
-    omega = 2 * np.pi * SERVO_HZ
-    return Servo(kp=2 * inertia * omega**2, kv=4 * inertia * omega, armature=inertia)
