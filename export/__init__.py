@@ -134,7 +134,7 @@ def export_mechanism(
     options = options or ExportOptions()
     sizes, layout = _layered(mech, assembly, options, progress=say)
     narrowed = sizes.link_width / resolve_sizes(mech, assembly.parts, options).link_width
-    shapes, assembly, layout = drive(mech, assembly, layout, sizes, sweep(mech, sizes.link_width))
+    shapes, assembly, layout = drive(mech, assembly, layout, sizes)
     say(f"writing {layout.count} layers of parts")
     files: list[Path] = []
     meshes, wholes, volumes = {}, {}, {}

@@ -25,13 +25,14 @@ the crank about its centre (`Drive.centres`), so their paths follow from the cra
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from linkd.mechanism import Mechanism
 
-from .layers import Arm, Layout, Shaft, Strap
+from .layers import Arm, Layout, Shaft, Strap, sweep
 from .options import Sizes
 from .parts import Assembly, Hinge, Loop, Part, Pin
 
@@ -96,19 +97,19 @@ def _halves(assembly: Assembly, layout: Layout) -> tuple[list[Arm], list[Arm]] |
 
 
 def drive(
-    mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes, paths: np.ndarray
+    mech: Mechanism, assembly: Assembly, layout: Layout, sizes: Sizes
 ) -> tuple[Mechanism, Assembly, Layout]:
     """The mechanism with the drive's points appended (for its parts' shapes only), and the
     assembly and layout with the crank cut in two and the drive's parts added; all unchanged
-    where the crank is one rigid part (`_halves`). `paths` (N, T, 2): the joints' sweep."""
+    where the crank is one rigid part (`_halves`)."""
     halves = _halves(assembly, layout)
     if halves is None:
         return mech, assembly, layout
     lower, upper = halves
     crank, pivot = assembly.crank.child, assembly.crank.joint
     motor = next(k for k, pin in enumerate(assembly.pins) if pin.joint == pivot)
-    points, centres = _points(mech, pivot, paths, sizes.link_width)
-    cut, half = _cut(assembly, [j for arm in upper for j in arm.joints if j != pivot], motor)
+    points, centres = _points(mech, pivot, sweep(mech, sizes.link_width), sizes.link_width)
+    cut, half, owner = _cut(assembly, [j for arm in upper for j in arm.joints if j != pivot], motor)
     n, top = len(mech.positions), layout.count - 1
     axis, rod_layers = n, (-1, -2, top + 1, top + 2)  # joint n: the layshaft's axis
     rod_joints = [(n + 1 + 3 * r, n + 2 + 3 * r, n + 3 + 3 * r) for r in range(4)]  # A, B, M
@@ -133,11 +134,6 @@ def drive(
         straps += [Strap(rod, a, on[r], radius, (motor,), (a, m)),
                    Strap(rod, b, layshaft, radius, (shaft_pin,), (b, m))]  # fmt: skip
         shafts.append(Shaft(rod, m, (layer, layer)))
-    upper_joints = set(parts[half].joints) - {pivot}
-
-    def owner(p: int, j: int) -> int:  # a strap or shaft of the crank's at an upper joint
-        return half if p == crank and j in upper_joints else p
-
     kept = [replace(s, part=owner(s.part, s.joint), sheave_of=owner(s.sheave_of, s.joint))
             for s in layout.straps]  # fmt: skip
     kept_shafts = [replace(s, part=owner(s.part, s.joint)) for s in layout.shafts]
@@ -181,10 +177,13 @@ def _points(
     return np.array(points), np.array(centres)
 
 
-def _cut(assembly: Assembly, upper: list[int], motor: int) -> tuple[Assembly, int]:
+def _cut(
+    assembly: Assembly, upper: list[int], motor: int
+) -> tuple[Assembly, int, Callable[[int, int], int]]:
     """The assembly with the crank's `upper` joints on a new part, the crank's upper half,
     hinged at the motor's pivot right after the crank (parents before children), which carries
-    what the crank carried there. Returns it and the half's index."""
+    what the crank carried there. Returns it, the half's index, and which part now holds what
+    part p held at joint j."""
     crank, pivot = assembly.crank.child, assembly.crank.joint
     part, half = assembly.parts[crank], len(assembly.parts)
     mine = sorted({pivot, *upper})
@@ -207,4 +206,4 @@ def _cut(assembly: Assembly, upper: list[int], motor: int) -> tuple[Assembly, in
             for k, pin in enumerate(assembly.pins)]  # fmt: skip
     loops = [replace(loop, part=owner(loop.part, loop.joint), hub=owner(loop.hub, loop.joint))
              for loop in assembly.loops]  # fmt: skip
-    return Assembly(parts, hinges, pins, loops), half
+    return Assembly(parts, hinges, pins, loops), half, owner
