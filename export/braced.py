@@ -36,9 +36,9 @@ together (`split_straps_layers`): in a few mechanisms a plate must be cut so tha
 on both sides of a part, and a link must turn on a sheave so that a pin may cross its layer,
 and neither alone layers. Each split, fewest first, gets the straps' own search, with no
 bracket; an arm may be a strap too (bored round the sheave at one of its joints). And where
-that fails, the same with the motor's shaft cut into stubs as well (`cut_crank_layers`): the
-crank's arms then lie on both sides of the parts passing over its pivot, its two halves driven
-as one from outside the stack (`drive`).
+that fails, the same with the motor's shaft cut into stubs as well (`cut_crank_layers`, on
+the splits that cut the crank at the motor): the crank's arms then lie on both sides of the
+parts passing over its pivot, its two halves driven as one from outside the stack (`drive`).
 """
 
 from __future__ import annotations
@@ -70,6 +70,7 @@ MAX_SEARCHES = 300  # layer searches per width before the construction gives up
 MAX_LINK_CUTS = 100  # and then for plates cut along their own links
 MAX_LINK_SETS = 20_000  # sets of a plate's links tried as trees of arms
 MAX_SPLIT_STRAPS = 16  # splits tried with straps (`split_straps_layers`); those built took 4
+MAX_CUT_SPLITS = 4  # and with the crank cut too, of those splitting it at the motor; built: 2
 
 
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -117,7 +118,9 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
 
 def cut_crank_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """`split_straps_layers` with the motor's shaft, too, cut into stubs from base and cover,
-    the crank's arms on both (its two halves turned as one from outside the stack, `drive`)."""
+    the crank's arms on both (its two halves turned as one from outside the stack, `drive`).
+    Only splits that cut the crank into two or more arms at the motor are searched (the first
+    MAX_CUT_SPLITS): with the crank whole there, the search is the one that failed already."""
     return _split_straps(assembly, paths, sizes, cut=True)
 
 
@@ -127,7 +130,11 @@ def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     _, ways = _cuts(assembly, plates, paths)
     crank, motor = assembly.crank.child, assembly.crank.joint
-    for split in islice((s for s in _splits(ways) if s), MAX_SPLIT_STRAPS):
+
+    def worth(split: dict) -> bool:
+        return bool(split) and (not cut or sum(motor in arm for arm in split.get(crank, ())) >= 2)
+
+    for split in islice(filter(worth, _splits(ways)), MAX_CUT_SPLITS if cut else MAX_SPLIT_STRAPS):
         keep = _kept(roles, split, [])
         chosen, share = _subset(union, conflicts, keep, ())
         kept = [roles[q] for q in keep]

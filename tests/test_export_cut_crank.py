@@ -30,6 +30,18 @@ CUT = Mechanism(
      (4, 12), (5, 9), (6, 9), (6, 10), (7, 8), (8, 11), (9, 11), (11, 12)],
     (0, 1), 12, units="mm",
 )  # fmt: skip
+# Generated (seed 17, no. 149 of 200, 5 to 20 joints), in mm. Refused while the cut crank's
+# search spent its splits on plates other than the crank (the first 16 left it whole, as
+# split plates with straps had already tried): only a split of the crank at the motor is new.
+AT_THE_MOTOR = Mechanism(
+    [(95.569, 44.595), (85.718, 77.033), (-28.23, -88.005), (34.378, -26.584), (-66.074, 44.995),
+     (-85.515, 21.946), (23.676, 59.175), (-65.004, 93.334), (-3.489, 13.27), (34.621, -17.109),
+     (-80.137, 16.437), (-4.333, 36.397), (3.502, -12.02)],
+    [1, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 4), (2, 7), (2, 8), (3, 4), (3, 5), (4, 5), (4, 11), (5, 9),
+     (5, 11), (5, 12), (6, 7), (6, 9), (6, 10), (7, 8), (7, 10), (7, 12)],
+    (0, 1), 12, units="mm",
+)  # fmt: skip
 CRANK, UPPER = "plate_0_1_4", "plate_0_1_4_upper"
 RODS = [f"drive_rod{k}" for k in range(4)]
 
@@ -105,3 +117,16 @@ def test_a_rod_planted_on_its_neighbours_layer_is_caught(built, tmp_path):
             geom.set("pos", f"{x} {y} {z + pitch}")
     detail = collision_detail(tree, tmp_path)
     assert "drive_rod1" in detail and "drive_rod0" in detail
+
+
+def test_the_cut_crank_search_spends_its_splits_on_the_crank(tmp_path):
+    assembly = assemble(AT_THE_MOTOR)
+    sizes = resolve_sizes(AT_THE_MOTOR, assembly.parts, None)
+    with pytest.raises(NoFlatLayers):
+        split_straps_layers(assembly, sweep(AT_THE_MOTOR, sizes.link_width), sizes)
+    result, report = export_verified(AT_THE_MOTOR, tmp_path, {"mjcf", "stl"})
+    assert report.passed, report.failed
+    assert result.drive == "drive_layshaft"
+    saved = json.loads((tmp_path / "mechanism.json").read_text())
+    stubs = {p["name"]: p["fixed_in"] for p in saved["parts"] if p["name"].startswith("pin_0")}
+    assert stubs == {"pin_0": "plate_0_1_2", "pin_0_top": "plate_0_1_2_upper"}
