@@ -1,5 +1,6 @@
 """`linkd bench`: the targets run and print their figures; the compiled kernel agrees with eager."""
 
+import re
 import shutil
 
 import numpy as np
@@ -33,6 +34,8 @@ def test_export_target_exports_and_verifies_unseen_mechanisms(capsys):
     counts = [int(line.split()[-1]) for line in out.splitlines()
               if line.strip().startswith(outcomes)]  # fmt: skip
     assert sum(counts) == 4 and "failed verification" not in out
+    slowest = next(line for line in out.splitlines() if "export + verify seconds" in line)
+    assert re.search(r"max [0-9.]+ \(no\. [0-3]\)$", slowest)  # named, to be rebuilt
 
 
 BAD_JOINTS = [["--min-joints", "4"], ["--min-joints", "9", "--max-joints", "8"],

@@ -212,6 +212,7 @@ def export(args: argparse.Namespace) -> int:
                       for n, graph in enumerate(graphs)}  # fmt: skip
     outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
     refused_ones, failed_ones = [], []  # their names in the run (to rebuild them)
+    slowest = (0.0, "")  # the longest export + verify, and its name
     for name, mech in mechanisms.items():
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
         with tempfile.TemporaryDirectory(prefix="linkd-bench-") as out:
@@ -224,6 +225,7 @@ def export(args: argparse.Namespace) -> int:
                 refused_ones.append(f"{name} ({len(mech.positions)} joints)")
                 continue
             seconds.append(time.perf_counter() - start)
+            slowest = max(slowest, (seconds[-1], name))
         layers.append(result.layers)
         outcome["verified" if report.passed else "failed verification"] += 1
         if report.passed and result.sizes["link_width"] < width:
@@ -284,7 +286,7 @@ def export(args: argparse.Namespace) -> int:
         print(f"  layers                       {min(layers)}..{max(layers)}, "
               f"mean {np.mean(layers):.1f}, median {np.median(layers):g}")  # fmt: skip
         print(f"  export + verify seconds      median {np.median(seconds):.2f}, "
-              f"max {max(seconds):.2f}")  # fmt: skip
+              f"max {max(seconds):.2f} ({slowest[1]})")  # fmt: skip
     if refusals:  # what a user waits to be told no
         print(f"  seconds to refuse            median {np.median(refusals):.2f}, "
               f"max {max(refusals):.2f}")  # fmt: skip
