@@ -38,7 +38,8 @@ and neither alone layers. Each split, fewest first, gets the straps' own search,
 bracket; an arm may be a strap too (bored round the sheave at one of its joints). And where
 that fails, the same with the motor's shaft cut into stubs as well (`cut_crank_layers`, on
 the splits that cut the crank at the motor): the crank's arms then lie on both sides of the
-parts passing over its pivot, its two halves driven as one from outside the stack (`drive`).
+parts passing over its pivot, its two halves driven as one from outside the stack (`drive`);
+there, many splits are first asked (exactly, and quickly) whether they layer with no strap.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ MAX_LINK_CUTS = 100  # and then for plates cut along their own links
 MAX_LINK_SETS = 20_000  # sets of a plate's links tried as trees of arms
 MAX_SPLIT_STRAPS = 16  # splits tried with straps (`split_straps_layers`); those built took 4
 MAX_CUT_SPLITS = 4  # and with the crank cut too, of those splitting it at the motor; built: 2
+MAX_CUT_SCREENED = 2_000  # and before those, splits asked exactly whether they layer strapless
 
 
 def braced_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -125,7 +127,8 @@ def cut_crank_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Lay
 
 
 def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool) -> Layout:
-    """split_straps_layers; cut: the motor's shaft need not stay whole."""
+    """split_straps_layers; cut: the motor's shaft need not stay whole, and the first
+    MAX_CUT_SCREENED splits are asked, in milliseconds each, whether they layer strapless."""
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     _, ways = _cuts(assembly, plates, paths)
@@ -134,7 +137,7 @@ def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool
     def worth(split: dict) -> bool:
         return bool(split) and (not cut or sum(motor in arm for arm in split.get(crank, ())) >= 2)
 
-    for split in islice(filter(worth, _splits(ways)), MAX_CUT_SPLITS if cut else MAX_SPLIT_STRAPS):
+    def chosen_for(split: dict) -> tuple[Assembly, Conflicts, list[tuple], list[int]]:
         keep = _kept(roles, split, [])
         chosen, share = _subset(union, conflicts, keep, ())
         kept = [roles[q] for q in keep]
@@ -142,6 +145,17 @@ def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool
                       if role[1] == crank and motor in chosen.parts[k].joints)  # fmt: skip
         chosen = replace(chosen, hinges=[replace(assembly.crank, child=driven)])
         shafts = [k for k in _shafts(chosen, kept) if not (cut and chosen.pins[k].joint == motor)]
+        return chosen, share, kept, shafts
+
+    for split in islice(filter(worth, _splits(ways)), MAX_CUT_SCREENED if cut else 0):
+        chosen, share, kept, shafts = chosen_for(split)
+        try:
+            layout = stack_layers(chosen, share, sizes, stubs=True, whole=shafts)
+        except NoFlatLayers:
+            continue
+        return _real(assembly, layout, chosen, kept, posts, len(paths))
+    for split in islice(filter(worth, _splits(ways)), MAX_CUT_SPLITS if cut else MAX_SPLIT_STRAPS):
+        chosen, share, kept, shafts = chosen_for(split)
         for core in (False, True):
             try:
                 layout = strap_search(chosen, share, paths, sizes, core=core, shafts=shafts)

@@ -11,7 +11,8 @@ import pytest
 import trimesh
 from planted import collision_detail, editable_copy
 
-from linkd.export.braced import split_straps_layers
+from linkd.export import braced
+from linkd.export.braced import cut_crank_layers, split_straps_layers
 from linkd.export.layers import NoFlatLayers, sweep
 from linkd.export.options import resolve_sizes
 from linkd.export.parts import assemble
@@ -41,6 +42,20 @@ AT_THE_MOTOR = Mechanism(
     [(0, 1), (0, 2), (1, 2), (1, 4), (2, 7), (2, 8), (3, 4), (3, 5), (4, 5), (4, 11), (5, 9),
      (5, 11), (5, 12), (6, 7), (6, 9), (6, 10), (7, 8), (7, 10), (7, 12)],
     (0, 1), 12, units="mm",
+)  # fmt: skip
+# Generated (seed 12, no. 88 of 200, 5 to 20 joints), in mm. Refused while the cut crank's
+# search tried straps on its first splits alone: the 26th split of the crank at the motor layers
+# with no strap at all, which is now asked first, exactly, of many splits.
+STRAPLESS = Mechanism(
+    [(-57.341, 17.705), (-33.283, -17.689), (44.393, 87.591), (-26.33, -28.34), (-41.925, 94.309),
+     (-20.629, -52.147), (70.58, -35.747), (59.437, -66.911), (35.01, 96.65), (-41.527, -59.855),
+     (-86.573, 74.549), (54.996, 75.077), (67.568, 10.632), (-61.301, -69.733), (67.056, -87.22),
+     (42.958, 15.937), (68.826, 47.205), (84.158, -60.987), (14.317, -79.474)],
+    [1, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0],
+    [(0, 1), (0, 2), (1, 2), (1, 3), (1, 12), (1, 18), (2, 3), (2, 5), (2, 9), (2, 15), (3, 8),
+     (4, 5), (4, 6), (4, 7), (5, 6), (5, 10), (5, 14), (6, 7), (6, 8), (6, 9), (6, 10), (6, 14),
+     (9, 15), (10, 13), (10, 17), (11, 12), (11, 13), (11, 16), (13, 16), (13, 17), (16, 18)],
+    (0, 1), 18, units="mm",
 )  # fmt: skip
 CRANK, UPPER = "plate_0_1_4", "plate_0_1_4_upper"
 RODS = [f"drive_rod{k}" for k in range(4)]
@@ -130,3 +145,20 @@ def test_the_cut_crank_search_spends_its_splits_on_the_crank(tmp_path):
     saved = json.loads((tmp_path / "mechanism.json").read_text())
     stubs = {p["name"]: p["fixed_in"] for p in saved["parts"] if p["name"].startswith("pin_0")}
     assert stubs == {"pin_0": "plate_0_1_2", "pin_0_top": "plate_0_1_2_upper"}
+
+
+def test_a_split_that_layers_with_no_strap_is_found_first(tmp_path, monkeypatch):
+    assembly = assemble(STRAPLESS)
+    sizes = resolve_sizes(STRAPLESS, assembly.parts, None)
+    paths = sweep(STRAPLESS, sizes.link_width)
+    with monkeypatch.context() as patch:
+        patch.setattr(braced, "MAX_CUT_SCREENED", 0)  # the straps' search alone, as before
+        with pytest.raises(NoFlatLayers):
+            cut_crank_layers(assembly, paths, sizes)
+    assert not cut_crank_layers(assembly, paths, sizes).straps
+    result, report = export_verified(STRAPLESS, tmp_path, {"mjcf", "stl"})
+    assert report.passed, report.failed
+    assert result.drive == "drive_layshaft"
+    saved = json.loads((tmp_path / "mechanism.json").read_text())
+    sheaves = [p["name"] for p in saved["parts"] if p["kind"] == "sheave"]
+    assert sheaves and all(name.startswith("drive_") for name in sheaves)  # the drive's alone

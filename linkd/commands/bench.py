@@ -46,6 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--walkers", action="store_true",
                    help="Jansen walkers instead: one leg, a mirrored pair, and each on a crank "
                         "of three pins (8 to 36 joints)")  # fmt: skip
+    e.add_argument("--bounds", action="store_true",
+                   help="for each refused mechanism, what would have to be held otherwise "
+                        "for it to layer, and whether brackets or rings could")  # fmt: skip
     e.set_defaults(run=export)
 
     d = targets.add_parser("design", help="linkd design on curves: validity, error, time")
@@ -187,7 +190,8 @@ def export(args: argparse.Namespace) -> int:
     import numpy as np
 
     from linkd.classic import jansen_walker
-    from linkd.export import TIMESTEP
+    from linkd.export import NARROWER, TIMESTEP
+    from linkd.export.bounds import bounds
     from linkd.export.options import resolve_sizes
     from linkd.export.parts import assemble
     from linkd.generator import MAX_NODES, GeneratorSettings, generate
@@ -212,6 +216,7 @@ def export(args: argparse.Namespace) -> int:
                       for n, graph in enumerate(graphs)}  # fmt: skip
     outcome, failed, layers, seconds, refusals = Counter(), Counter(), [], [], []
     refused_ones, failed_ones = [], []  # their names in the run (to rebuild them)
+    bounded = []  # with --bounds: each refused one's
     slowest = (0.0, "")  # the longest export + verify, and its name
     for name, mech in mechanisms.items():
         width = resolve_sizes(mech, assemble(mech).parts, None).link_width
@@ -223,6 +228,8 @@ def export(args: argparse.Namespace) -> int:
                 outcome["refused (no flat layering)"] += 1
                 refusals.append(time.perf_counter() - start)
                 refused_ones.append(f"{name} ({len(mech.positions)} joints)")
+                if args.bounds:
+                    bounded.append(f"{name}: {bounds(mech, NARROWER[-1]).describe()}")
                 continue
             seconds.append(time.perf_counter() - start)
             slowest = max(slowest, (seconds[-1], name))
@@ -291,6 +298,8 @@ def export(args: argparse.Namespace) -> int:
         print(f"  seconds to refuse            median {np.median(refusals):.2f}, "
               f"max {max(refusals):.2f}")  # fmt: skip
         print(f"  the refused ones             {', '.join(refused_ones)}")
+    for line in bounded:
+        print(f"  bounds ({NARROWER[-1]:g} of the width)    {line}")
     return 0
 
 
