@@ -95,6 +95,7 @@ def test_forks_round_a_bracket_build_what_no_single_fork_does(monkeypatch, tmp_p
     monkeypatch.setattr(forked, "MAX_SETS", 0)
     monkeypatch.setattr(braced, "MAX_SPLIT_STRAPS", 0)  # these build it too, without forks
     monkeypatch.setattr(braced, "MAX_CUT_SPLITS", 0)
+    monkeypatch.setattr(braced, "MAX_CUT_SCREENED", 0)
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BRACED, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()
