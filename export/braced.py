@@ -45,6 +45,7 @@ there, many splits are first asked (exactly, and quickly) whether they layer wit
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
+from contextlib import suppress
 from dataclasses import replace
 from itertools import combinations, islice, product
 
@@ -119,16 +120,14 @@ def split_straps_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
 
 
 def cut_crank_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
-    """`split_straps_layers` with the motor's shaft, too, cut into stubs from base and cover,
-    the crank's arms on both (its two halves turned as one from outside the stack, `drive`).
-    Only splits that cut the crank into two or more arms at the motor are searched (the first
-    MAX_CUT_SPLITS): with the crank whole there, the search is the one that failed already."""
+    """`split_straps_layers` with the motor's shaft, too, cut into stubs from base and cover
+    (the crank's halves turned as one from outside the stack, `drive`), on the splits that cut
+    the crank at the motor: with it whole there, the search is the one that failed already."""
     return _split_straps(assembly, paths, sizes, cut=True)
 
 
 def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool) -> Layout:
-    """split_straps_layers; cut: the motor's shaft need not stay whole, and the first
-    MAX_CUT_SCREENED splits are asked, in milliseconds each, whether they layer strapless."""
+    """split_straps_layers; cut: the motor's shaft need not stay whole (and MAX_CUT_SCREENED)."""
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     _, ways = _cuts(assembly, plates, paths)
@@ -149,11 +148,9 @@ def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool
 
     for split in islice(filter(worth, _splits(ways)), MAX_CUT_SCREENED if cut else 0):
         chosen, share, kept, shafts = chosen_for(split)
-        try:
+        with suppress(NoFlatLayers):  # the first that layers with no strap
             layout = stack_layers(chosen, share, sizes, stubs=True, whole=shafts)
-        except NoFlatLayers:
-            continue
-        return _real(assembly, layout, chosen, kept, posts, len(paths))
+            return _real(assembly, layout, chosen, kept, posts, len(paths))
     for split in islice(filter(worth, _splits(ways)), MAX_CUT_SPLITS if cut else MAX_SPLIT_STRAPS):
         chosen, share, kept, shafts = chosen_for(split)
         for core in (False, True):
