@@ -127,7 +127,7 @@ def cut_crank_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Lay
 
 
 def _split_straps(assembly: Assembly, paths: np.ndarray, sizes: Sizes, cut: bool) -> Layout:
-    """split_straps_layers; cut: the motor's shaft need not stay whole (and MAX_CUT_SCREENED)."""
+    """split_straps_layers; cut: the motor's shaft may be cut, and strapless splits come first."""
     plates = [q for q, part in enumerate(assembly.parts) if part.kind == "plate"]
     union, roles, posts, conflicts = swept_candidates(assembly, paths, sizes)
     _, ways = _cuts(assembly, plates, paths)
