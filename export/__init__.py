@@ -37,6 +37,7 @@ from .described import describe_parts
 from .drive import drive
 from .forked import forked_layers
 from .framed import framed_layers, modular
+from .ground_rings import ground_rings_layers
 from .layers import Layout, assign_layers, find_conflicts, sweep
 from .mjcf import (
     PROBE_DENSITY,
@@ -67,7 +68,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  several_straps_layers: "several eccentric straps at once",
                  turntable_core_layers: "a turntable with several straps",
                  split_straps_layers: "split plates with straps",
-                 cut_crank_layers: "a crank cut in two, driven from a layshaft"}  # fmt: skip
+                 cut_crank_layers: "a crank cut in two, driven from a layshaft",
+                 ground_rings_layers: "ground pivots on rings"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -76,7 +78,7 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
 # search finds none there, the widths between are not tried.
 SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers,
-                      cut_crank_layers})  # fmt: skip
+                      cut_crank_layers, ground_rings_layers})  # fmt: skip
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -93,6 +95,7 @@ class ExportResult:
     crank: str = ""  # the crank's part name
     turntables: tuple[str, ...] = ()  # the parts at the motor's pivot on turntables
     drive: str = ""  # the layshaft's name where the crank is cut in two and driven from it
+    lugged: tuple[str, ...] = ()  # the parts at other ground pivots on rings held by lugs
 
     @property
     def turntable(self) -> str | None:
@@ -155,8 +158,9 @@ def export_mechanism(
     return ExportResult(layout.count, parts, sorted(files), time.perf_counter() - start,
                         sizes.to_dict(), layout.min_gap, layout.minimal, narrowed,
                         names[assembly.crank.child],
-                        tuple(names[table.part] for table in layout.turntables),
-                        names[layout.drive.layshaft] if layout.drive else "")  # fmt: skip
+                        tuple(names[t.part] for t in layout.turntables if not t.spans),
+                        names[layout.drive.layshaft] if layout.drive else "",
+                        tuple(names[t.part] for t in layout.turntables if t.spans))  # fmt: skip
 
 
 def _layered(
@@ -196,7 +200,8 @@ def _layered(
         layerings.insert(2, framed_layers)
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
-                      turntable_core_layers, split_straps_layers, cut_crank_layers]  # fmt: skip
+                      turntable_core_layers, split_straps_layers, cut_crank_layers,
+                      ground_rings_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:
@@ -247,7 +252,7 @@ def _layered(
         if why:
             culprits = f"; with straight parts, {why} alone cannot all be kept clear"
     frames = ", framed" if framed_layers in layerings else ""
-    turned = ", turntables" if turntable_layers in layerings else ""
+    turned = ", turntables, ground rings" if turntable_layers in layerings else ""
     tried = f"straight, bent{frames}, strapped, split and forked parts{turned}{widths} tried"
     tried += culprits
     raise ValueError(f"{first} ({tried})")

@@ -105,7 +105,8 @@ class Strap:
 class Turntable:
     """A part at the motor's pivot `joint` made a disc of `radius` round it (`turntable`), or a
     ring where it has a `hole`, with no pin there: it turns in the bore of a ground ring on its
-    layer, held by `posts` from the base."""
+    layer, held by `posts` from the base; or the same at another ground pivot, its ring held
+    by a lug on a post (`ground_rings`) that spans the layers `spans` gives."""
 
     part: int
     joint: int
@@ -114,6 +115,7 @@ class Turntable:
     bore: float
     posts: tuple[tuple[float, float], ...]
     hole: float = 0.0  # a ring's: the radius of its hole, which pins may pass
+    spans: tuple[tuple[int, int], ...] = ()  # each post's (lowest, highest) layer, where given
 
 
 @dataclass(frozen=True)

@@ -44,9 +44,11 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
     stubs = (assembly.pins[k].joint for k in layout.cover_stubs)
     cover = tuple(sorted({*layout.top_joints, *stubs}))
     tables = layout.turntables
+    rings = posts(layout)[len(layout.brackets) :]  # the rings' posts, then the frames'
     low = tuple(b.post for b in layout.brackets if not b.top) + layout.frame_posts
-    low += tables[0].posts if tables else ()  # the turntables share their posts
+    low += tuple(point for point, (lo, _) in rings if lo == 0 and point not in low)
     high = tuple(b.post for b in layout.brackets if b.top) + layout.frame_posts
+    high += tuple(p for p, (_, hi) in rings if hi == layout.count - 1 and p not in high)
     if layout.frames:  # each ground plate holds the rods that end in it or pass it
         ends = [(rod.joint, rod.span) for rod in pin_rods(assembly, layout) if 0 in rod.members]
         base, cover = _held(ends, 0), _held(ends, layout.count - 1)
@@ -63,7 +65,7 @@ def plates(assembly: Assembly, layout: Layout) -> list[Plate]:
                          posts=layout.frame_posts))  # fmt: skip
     for k, table in enumerate(tables):  # a ring round each, with a bar out to each post
         out.append(Plate(f"{ground.name}_ring{k or ''}", 0, (table.joint,), table.layer,
-                         posts=table.posts, bore=table.bore))  # fmt: skip
+                         posts=tuple(dict.fromkeys(table.posts)), bore=table.bore))  # fmt: skip
     straps = {(strap.part, strap.arm): strap for strap in layout.straps}
     for strap in layout.straps:
         through = (assembly.pins[k].joint for k in strap.passing)
@@ -121,11 +123,14 @@ def plate_points(mech: Mechanism, plate: Plate) -> np.ndarray:
 
 def posts(layout: Layout) -> list[tuple[tuple[float, float], tuple[int, int]]]:
     """Each ground post's axis and (lowest, highest) layer: a bracket's from the base or down
-    from the cover, the turntables' rings' from the base to the highest ring, then the frames'
-    from the base to the cover."""
+    from the cover, the turntables' rings' from the base to the highest ring (or the spans a
+    ground ring's lug posts are given, each once), then the frames' from the base to the
+    cover."""
     top = layout.count - 1
     out = [(b.post, (b.layer, top) if b.top else (0, b.layer)) for b in layout.brackets]
-    tables = layout.turntables
-    top_ring = max((table.layer for table in tables), default=0)
-    out += [(point, (0, top_ring)) for point in (tables[0].posts if tables else ())]
+    shared = [table for table in layout.turntables if not table.spans]
+    top_ring = max((table.layer for table in shared), default=0)
+    out += [(point, (0, top_ring)) for point in (shared[0].posts if shared else ())]
+    lugged = (zip(table.posts, table.spans) for table in layout.turntables if table.spans)
+    out += list(dict.fromkeys(post for posts in lugged for post in posts))
     return out + [(point, (0, top)) for point in layout.frame_posts]

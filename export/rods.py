@@ -31,15 +31,16 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
     stub (`<name>_top`) hanging from the cover, each through the parts within its span. A pin
     where a part forks (`forks`) is coaxial rods fixed in the forked part, `<name>a`,
     `<name>b`, ... bottom up, each with the parts turning on it (a joint has under 20). A
-    part on a turntable is on no pin at the motor's pivot: that pin is only there where other
-    parts turn on it. Where the crank is cut in two (`drive`), the motor's stubs are fixed in
-    its halves and turn in the base and the cover."""
+    part on a turntable (or on a ground ring, at another ground pivot) is on no pin at its
+    pivot: that pin is only there where other parts turn on it. Where the crank is cut in two
+    (`drive`), the motor's stubs are fixed in its halves and turn in the base and the cover."""
     rods = []
-    tabled = {table.part for table in layout.turntables}
-    pivot = layout.turntables[0].joint if tabled else None
+    tabled = {table.joint: set() for table in layout.turntables}
+    for table in layout.turntables:
+        tabled[table.joint].add(table.part)
     for k, pin in enumerate(assembly.pins):
-        if pin.joint == pivot:  # the turntables' parts turn in their rings instead
-            members = tuple(m for m in pin.members if m not in tabled)
+        if pin.joint in tabled:  # the turntables' parts turn in their rings instead
+            members = tuple(m for m in pin.members if m not in tabled[pin.joint])
             if not any(members):
                 continue
             pin = replace(pin, hub=pin.hub if pin.hub in members else members[0], members=members)

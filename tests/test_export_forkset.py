@@ -13,6 +13,7 @@ from pysat.solvers import Solver
 
 import linkd.export.braced as braced
 import linkd.export.forked as forked
+import linkd.export.ground_rings as ground_rings
 import linkd.export.strapped as strapped
 from linkd.export import export_mechanism
 from linkd.export.braced import best_brackets, swept_candidates
@@ -64,6 +65,7 @@ def tripod(tmp_path_factory):
 def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path):
     monkeypatch.setattr(forked, "MAX_SETS", 0)
     monkeypatch.setattr(strapped, "MAX_STRAPS", 0)  # a turntable with straps builds it too
+    monkeypatch.setattr(ground_rings, "MAX_SPLITS", 0)  # and so do ground rings
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(TRIPOD, tmp_path, {"mjcf"})
     out, result, report = tripod
@@ -96,6 +98,7 @@ def test_forks_round_a_bracket_build_what_no_single_fork_does(monkeypatch, tmp_p
     monkeypatch.setattr(braced, "MAX_SPLIT_STRAPS", 0)  # these build it too, without forks
     monkeypatch.setattr(braced, "MAX_CUT_SPLITS", 0)
     monkeypatch.setattr(braced, "MAX_CUT_SCREENED", 0)
+    monkeypatch.setattr(ground_rings, "MAX_SPLITS", 0)
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BRACED, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()

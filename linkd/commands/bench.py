@@ -260,9 +260,11 @@ def export(args: argparse.Namespace) -> int:
                 arms.setdefault(part["arm_of"], []).append(set(part["joints"]))
         if report.passed and any(not set.intersection(*cut) for cut in arms.values()):
             outcome["    cut along their links"] += 1  # not a star: no joint in every arm
-        turned = bool(result.turntables)  # posts hold their rings
-        if report.passed and turned:
+        turned = bool(result.turntables or result.lugged)  # posts hold their rings
+        if report.passed and result.turntables:
             outcome["  of which on turntables"] += 1
+        if report.passed and result.lugged:
+            outcome["  of which on ground rings"] += 1
         posted = any(part["kind"] == "post" for part in result.parts)
         if report.passed and posted and not (framed or turned):
             outcome["  of which on a bracket"] += 1
@@ -281,8 +283,9 @@ def export(args: argparse.Namespace) -> int:
                  "  of which with split plates", "    cut along their links",
                  "  of which strapped", "  of which on a bracket", "  of which forked",
                  "    several parts at once", "  of which on turntables",
-                 "  of which on ground stubs", "  of which with the crank cut in two",
-                 "  of which with a finer step", "failed verification",
+                 "  of which on ground rings", "  of which on ground stubs",
+                 "  of which with the crank cut in two", "  of which with a finer step",
+                 "failed verification",
                  "refused (no flat layering)"):  # fmt: skip
         if outcome[name]:
             print(f"  {name:28s} {outcome[name]}")

@@ -193,6 +193,8 @@ def run(args: argparse.Namespace) -> int:
         narrower += ", the crank on a turntable (drive it at its rim)"
     if d.export.rings:
         narrower += f", {len(d.export.rings)} more parts on turntables round the motor's pivot"
+    if d.export.lugged:
+        narrower += f", {len(d.export.lugged)} parts on ground rings held by lugs"
     if d.export.drive:
         narrower += f", the crank cut in two and its halves turned as one by {d.export.drive}"
     print(f"{out}: {m.nodes}-joint linkage, curve error {m.chamfer:.4f} (Chamfer, normalised), "

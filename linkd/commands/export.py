@@ -124,6 +124,8 @@ def run(args: argparse.Namespace) -> int:
     turned = f"; the crank ({disc}) on a turntable: drive it at its rim" if disc else ""
     if result.rings:
         turned += f"; {', '.join(result.rings)} on turntables round the motor's pivot"
+    if result.lugged:
+        turned += f"; {', '.join(result.lugged)} on ground rings, each held by a lug on a post"
     if result.drive:
         turned += (
             f"; the crank cut in two at the motor's shaft, its halves turned as one by "
