@@ -79,19 +79,20 @@ class _Ring:
         reach = self.sizes.hole_diameter / 2 + clearance + self.step
         centre = complex(*self.still[self.pivot, 0])
         circle = np.exp(2j * np.pi * np.arange(LUGS) / LUGS)
-        lugs = centre + (max(self.outer.values()) + width / 2) * circle
+        out = max(self.outer.values()) + width / 2
+        lugs = centre + out * circle
         rim = centre + (min(self.outer.values()) - width / 2) * circle
         points = self.still[..., 0] + 1j * self.still[..., 1]  # (S, T)
         bars = {p: centre + self.outer[p] * circle for p in self.parts}
+        near, passing = width + clearance + self.step, width / 2 + reach
         return _Lugs(
             np.stack([lugs.real, lugs.imag], -1),
-            _distances(self.union, self.still, rim, lugs) < width + clearance + self.step,
-            _distances(self.union, self.still, lugs, lugs) < width / 2 + reach,
+            _distances(self.union, self.still, rim, lugs, near) < near,
+            _distances(self.union, self.still, lugs, lugs, passing) < passing,
             bars,
-            {p: point_segment(points[None], start[:, None, None], lugs[:, None, None]).min(-1)
-             < width / 2 + reach for p, start in bars.items()},
+            {p: _crossing(points, centre, self.outer[p], out, circle, passing) for p in bars},
             width / 2 + self.sizes.hole_diameter / 2 + clearance,
-        )  # fmt: skip
+        )
 
 
 def ground_rings_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
@@ -162,14 +163,17 @@ def _ring(
     )  # fmt: skip
 
 
-def _distances(union: Assembly, paths: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _distances(
+    union: Assembly, paths: np.ndarray, a: np.ndarray, b: np.ndarray, below: float | None = None
+) -> np.ndarray:
     """(S, P) the least distance over the sweep between each still segment a-b (complex) and
-    each candidate's outline (0 where an end lies inside a plate)."""
+    each candidate's outline (0 where an end lies inside a plate); with `below`, only whether
+    it is below that is exact (`least_distances`)."""
     points, owner, ends = outlines(union, paths)
     start, end = points[ends[:, 0]], points[ends[:, 1]]
     count = paths.shape[1]
     a, b = np.repeat(a[:, None], count, 1), np.repeat(b[:, None], count, 1)
-    gap = least_distances(a, b, start, end, segment_distance)
+    gap = least_distances(a, b, start, end, segment_distance, below=below)
     out = np.full((len(a), len(union.parts)), np.inf)
     np.minimum.at(out, (np.arange(len(a))[:, None], owner[None, :]), gap)
     for q in range(len(union.parts)):
@@ -179,6 +183,28 @@ def _distances(union: Assembly, paths: np.ndarray, a: np.ndarray, b: np.ndarray)
                 left = cross(start[mine][None], end[mine][None], ends_at[:, None]) >= 0
                 out[left.all(1).any(-1), q] = 0.0
     return out
+
+
+def _crossing(
+    points: np.ndarray,
+    centre: complex,
+    inner: float,
+    outer: float,
+    circle: np.ndarray,
+    reach: float,
+) -> np.ndarray:
+    """(L, S) whether each path of `points` (S, T, complex) comes within `reach` of the bar
+    from `inner` to `outer` about `centre` in each direction of `circle` (L,): reckoned only at
+    the angles where the point lies near that annulus (few)."""
+    away = np.abs(points - centre)
+    joint, angle = np.nonzero((away > inner - reach) & (away < outer + reach))
+    crossed = np.zeros((len(circle), len(points)), bool)
+    if len(joint):
+        bars = (centre + inner * circle)[:, None], (centre + outer * circle)[:, None]
+        hit = point_segment(points[joint, angle], *bars) < reach  # (L, K), by joint
+        first = np.flatnonzero(np.r_[True, joint[1:] != joint[:-1]])
+        crossed[:, joint[first]] = np.logical_or.reduceat(hit, first, axis=1)
+    return crossed
 
 
 def _search(
@@ -199,14 +225,20 @@ def _search(
         arms = {q for q, role in enumerate(roles) if role[0] == "arm" and role[1] in ring.parts}
         union = _off_pivot(union, ring.pivot, set(ring.parts), arms)
     conflicts = _ringed(union, conflicts, rings)
-    motor = assembly.crank.joint
+    motor, first = assembly.crank.joint, len(posts) + len(paths)
     for cut, split in splits:
         keep = braced._kept(roles, split, [])
         layered = partial(_layered, roles=roles, keep=keep, sizes=sizes, motor=motor, cut=cut)
         if layered(union, conflicts, fewest=False) is None:
             continue
-        for lugs in product(range(LUGS), repeat=len(rings)):
-            lugged, with_lugs = _lugged(union, conflicts, rings, lugs, len(posts) + len(paths))
+        directions = [range(LUGS)]  # with several rings, each one's lugs that layer alone
+        if len(rings) > 1:
+            directions = [[lug for lug in range(LUGS)
+                           if layered(*_lugged(union, conflicts, [ring], (lug,), first),
+                                      fewest=False) is not None]
+                          for ring in rings]  # fmt: skip
+        for lugs in product(*directions):
+            lugged, with_lugs = _lugged(union, conflicts, rings, lugs, first)
             if layered(lugged, with_lugs, fewest=False) is None:
                 continue
             layout, chosen = layered(lugged, with_lugs, fewest=True)

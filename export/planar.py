@@ -67,6 +67,7 @@ def least_distances(
     symmetric: bool = False,
     rigid: np.ndarray | None = None,
     stride: int = 16,
+    below: float | None = None,
 ) -> np.ndarray:
     """(P, M) least `distance` over the angles between each segment a1-a2 (P, T) and each
     b1-b2 (M, T), cyclic in the angle: `distance(a1[:, None], a2[:, None], b1, b2).min(-1)`,
@@ -76,7 +77,8 @@ def least_distances(
     there less half the way both segments' ends travel. (Parts pass near each other at a few
     angles of a sweep of thousands.) symmetric: a and b are the same segments. rigid: (P, M)
     pairs that move as one body, whose distance is the same at every angle (the coarse ones
-    serve)."""
+    serve). below: only whether each distance is below it matters, so a pair already nearer
+    at a coarse angle is not reckoned further (its figure is then only that angle's)."""
     count = a1.shape[-1]
     coarse = np.arange(0, count, stride)
     length = np.append(np.diff(coarse), count - coarse[-1])
@@ -93,6 +95,8 @@ def least_distances(
         maybe = (lowest - spared < least[p, :, None]) & (least[p, :, None] > 0)
         if rigid is not None:
             maybe &= ~rigid[p, :, None]
+        if below is not None:
+            maybe &= (lowest - spared < below) & (least[p, :, None] >= below)
         if symmetric:  # the pairs below the diagonal are mirrored at the end
             maybe &= (np.arange(first, first + len(near))[:, None] <= np.arange(len(b1)))[..., None]
         k, m, c = np.nonzero(maybe)

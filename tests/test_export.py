@@ -130,7 +130,8 @@ def _closed_paths(rng, count: int, angles: int) -> np.ndarray:
 def test_least_distances_are_the_least_over_every_angle(stride):
     """Reckoned at a few angles and then only where segments may come nearer, the least
     distances are those over every angle, to the last bit; pairs said to move as one body
-    (segments fixed in one turning frame) to rounding."""
+    (segments fixed in one turning frame) to rounding; asked only which are below a figure,
+    the same ones are."""
     rng = np.random.default_rng(stride)
     t = np.linspace(0, 2 * np.pi, 1000, endpoint=False)
     origin, turn = _closed_paths(rng, 1, 1000)[0], np.exp(1j * (t + 0.3 * np.sin(3 * t)))
@@ -147,6 +148,9 @@ def test_least_distances_are_the_least_over_every_angle(stride):
     assert np.array_equal(least_distances(b1, b2, b1, b2, symmetric=True, stride=stride), both)
     to_point = least_distances(a1, a1, b1, b2, to_segment)
     assert np.array_equal(to_point, point_segment(a1[:, None], b1, b2).min(-1))
+    for below in np.quantile(every, [0.1, 0.5, 0.9]):  # only which are nearer, reckoned less
+        nearer = least_distances(a1, a2, b1, b2, stride=stride, below=below) < below
+        assert np.array_equal(nearer, every < below)
 
 
 def test_conflicts_are_those_reckoned_at_every_angle(monkeypatch):
