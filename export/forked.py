@@ -171,7 +171,8 @@ def _problem(
 
     for k, pin in enumerate(union.pins):
         j, real = pin.joint, k < len(assembly.pins)
-        kept = real or pin.name.startswith("shaft_")  # a real pin, or a plate's own shaft
+        kept = real or pin.name.startswith(("shaft_", "lug"))  # a real pin, a plate's own
+        # shaft, or a ground ring's lug post (`forked_rings`)
         if pin.name.startswith("post"):
             if held is not None and bracket[held] in pin.members:
                 _add(problem, pin, [0, where[bracket[held]]], mapped(k))

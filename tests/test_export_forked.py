@@ -10,6 +10,7 @@ from planted import collision_detail, editable_copy
 
 import linkd.export.braced as braced
 import linkd.export.forked as forked
+import linkd.export.forked_rings as forked_rings
 import linkd.export.ground_rings as ground_rings
 import linkd.export.turntable as turntable
 from linkd.export import export_mechanism
@@ -122,6 +123,7 @@ def test_a_link_carrying_two_parts_at_one_joint_is_forked_without_a_bracket(monk
     monkeypatch.setattr(forked, "MAX_SETS", 0)
     monkeypatch.setattr(braced, "MAX_CUT_SCREENED", 0)  # the crank cut in two builds it too
     monkeypatch.setattr(ground_rings, "MAX_SPLITS", 0)  # and so do ground rings
+    monkeypatch.setattr(forked_rings, "MAX_RINGED", 0)  # alone or beside forks
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(CLEVIS, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()

@@ -13,6 +13,7 @@ from pysat.solvers import Solver
 
 import linkd.export.braced as braced
 import linkd.export.forked as forked
+import linkd.export.forked_rings as forked_rings
 import linkd.export.ground_rings as ground_rings
 import linkd.export.strapped as strapped
 from linkd.export import export_mechanism
@@ -66,6 +67,7 @@ def test_two_forks_build_what_no_single_fork_does(tripod, monkeypatch, tmp_path)
     monkeypatch.setattr(forked, "MAX_SETS", 0)
     monkeypatch.setattr(strapped, "MAX_STRAPS", 0)  # a turntable with straps builds it too
     monkeypatch.setattr(ground_rings, "MAX_SPLITS", 0)  # and so do ground rings
+    monkeypatch.setattr(forked_rings, "MAX_RINGED", 0)  # alone or beside forks
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(TRIPOD, tmp_path, {"mjcf"})
     out, result, report = tripod
@@ -99,6 +101,7 @@ def test_forks_round_a_bracket_build_what_no_single_fork_does(monkeypatch, tmp_p
     monkeypatch.setattr(braced, "MAX_CUT_SPLITS", 0)
     monkeypatch.setattr(braced, "MAX_CUT_SCREENED", 0)
     monkeypatch.setattr(ground_rings, "MAX_SPLITS", 0)
+    monkeypatch.setattr(forked_rings, "MAX_RINGED", 0)
     with pytest.raises(ValueError, match="flat layers"):
         export_mechanism(BRACED, tmp_path / "refused", {"mjcf"})
     monkeypatch.undo()
