@@ -22,7 +22,7 @@ import numpy as np
 from . import braced
 from .forked import drivable, fork_search
 from .forkset import fork_sets
-from .ground_rings import LUGS, MAX_RINGED, _lugged, _ring, _ringed
+from .ground_rings import LUGS, MAX_RINGED, _lugged, _Ring, _ring, _ringed
 from .layers import Conflicts, Layout, NoFlatLayers, Turntable
 from .options import Sizes
 from .parts import Assembly
@@ -75,14 +75,15 @@ class _Problem:
     roles: list[tuple]
     posts: np.ndarray
     sizes: Sizes
-    first: int  # the posts' first joint
+    posts_from: int  # the brackets' posts are joints from here on (none are used)
     taken: set[int]
 
     def allowed(self, assembly: Assembly, fork: tuple[int, int]) -> bool:
         return fork[0] not in self.taken and drivable(assembly, fork)
 
     def screened(self, union: Assembly, conflicts: Conflicts) -> bool:
-        """Whether the forks' screen (`forkset`) passes some set of forks, or none."""
+        """Whether the forks' screen (`forkset`) passes some set of forks: where it passes
+        none, no forks layer these candidates."""
         sets = fork_sets(self.searched, union, self.roles, conflicts, self.allowed, {}, 1)
         return next(sets, None) is not None
 
@@ -91,15 +92,16 @@ class _Problem:
         if not self.screened(union, conflicts):
             return None
         try:
-            return fork_search(self.searched, (union, self.roles, self.posts, conflicts),
-                               self.first, self.sizes, self.allowed, brackets=False)  # fmt: skip
+            candidates = (union, self.roles, self.posts, conflicts)
+            return fork_search(self.searched, candidates, self.posts_from, self.sizes,
+                               self.allowed, brackets=False)  # fmt: skip
         except ValueError:
             return None
 
 
 def _with_rings(
     layout: Layout,
-    rings: list,
+    rings: list[_Ring],
     lugs: tuple[int, ...],
     roles: list[tuple],
     sizes: Sizes,
