@@ -23,7 +23,7 @@ from . import braced
 from .forked import drivable, fork_search
 from .forkset import fork_sets
 from .ground_rings import LUGS, MAX_RINGED, _lugged, _Ring, _ring, _ringed
-from .layers import Conflicts, Layout, NoFlatLayers, Turntable
+from .layers import Conflicts, Layout, NoFlatLayers
 from .options import Sizes
 from .parts import Assembly
 from .turntable import _off_pivot
@@ -62,7 +62,7 @@ def forked_rings_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
             for lugs in product(*directions):
                 layout = problem.search(*_lugged(off, on_rings, chosen, lugs, first))
                 if layout is not None:
-                    return _with_rings(layout, chosen, lugs, roles, sizes, off, on_rings, first)
+                    return _with_rings(layout, chosen, lugs, roles, off, on_rings, first)
     raise NoFlatLayers("no ground pivots on rings layer beside forked parts")
 
 
@@ -104,7 +104,6 @@ def _with_rings(
     rings: list[_Ring],
     lugs: tuple[int, ...],
     roles: list[tuple],
-    sizes: Sizes,
     off: Assembly,
     on_rings: Conflicts,
     first: int,
@@ -123,12 +122,7 @@ def _with_rings(
         low = [layer for layer in mine if not passing or layer < min(passing)]
         high = [layer for layer in mine if layer not in low]
         spans = ([(0, low[-1])] if low else []) + ([(high[0], cover)] if high else [])
-        point = tuple(map(float, ring.lugs.points[lug]))
-        for p in ring.parts:
-            radius = ring.radius[p]
-            tables.append(Turntable(p, ring.pivot, int(layout.layers[p]), radius,
-                                    radius + sizes.clearance, (point,) * len(spans),
-                                    ring.hole[p], tuple(spans)))  # fmt: skip
+        tables += ring.turntables(layout.layers, lug, spans)
     return replace(layout, turntables=tuple(tables))
 
 

@@ -72,6 +72,13 @@ class _Ring:
     sizes: Sizes
     step: float  # the sweep's largest
 
+    def turntables(self, layers: np.ndarray, lug: int, spans: list) -> list[Turntable]:
+        """Each part's ring at its layer, its ground ring held by the lug's post(s) over `spans`."""
+        post = (tuple(map(float, self.lugs.points[lug])),) * len(spans)
+        return [Turntable(p, self.pivot, int(layers[p]), self.radius[p],
+                          self.radius[p] + self.sizes.clearance, post, self.hole[p], tuple(spans))
+                for p in self.parts]  # fmt: skip
+
     @cached_property
     def lugs(self) -> _Lugs:
         """Each lug half a width outside every ring at the pivot, its bar from each ring's rim."""
@@ -385,10 +392,5 @@ def _real(
         pin = at[f"lug{k}"]
         held = [layout.pin_spans[pin]] + ([layout.cover_stubs[pin]] if pin in layout.cover_stubs
                                           else [])  # fmt: skip
-        point = tuple(map(float, ring.lugs.points[lug]))
-        for p in ring.parts:
-            radius = ring.radius[p]
-            tables.append(Turntable(p, ring.pivot, int(real.layers[p]), radius,
-                                    radius + sizes.clearance, (point,) * len(held),
-                                    ring.hole[p], tuple(held)))  # fmt: skip
+        tables += ring.turntables(real.layers, lug, held)
     return replace(real, turntables=tuple(tables))
