@@ -4,8 +4,8 @@ In some mechanisms the parts at a ground pivot sweep over pins on both sides of 
 pin, stub or bracket holds the pivot: `ground_rings` puts those parts on rings held by a lug),
 while elsewhere a pin carries parts that others pass between in every order (so one part must
 be forked: `forked`). Neither alone layers; together they may. The search is the forks'
-(`forked.fork_search`: whole parts first, then one fork, then the sets of forks `forkset`
-screens; no bracket, and never a part on a ring), on the split plates' candidates with the
+(`forked.fork_search`: one fork, then the sets of forks `forkset` screens; no bracket,
+and never a part on a ring), on the split plates' candidates with the
 ringed parts off their pivot's pin, each ring's clearances as `ground_rings` reckons them and
 its lug's post a ground pin like a stub. Pivots are ringed one at a time, then two at once;
 each choice is first searched with its rings alone (no lugs: a looser problem), and only where
