@@ -43,6 +43,9 @@ def describe_parts(
         out.append(entry)
     fixed = {j: p for p, arms in layout.arms.items() for j in keyed(a.joints for a in arms)}
     fixed |= {assembly.pins[k].joint: fork.part for k, fork in layout.forks.items()}
+    halved = {assembly.pins[k].joint for k, fork in layout.forks.items() if fork.hubs}
+    if layout.drive:  # the motor's stubs, each fixed in its half of the crank
+        halved.add(assembly.pins[layout.drive.pin].joint)
     fixed |= {strap.joint: strap.sheave_of for strap in layout.straps}  # the sheave's pin
     for rod in pin_rods(assembly, layout):
         lo, hi = rod.span
@@ -52,7 +55,9 @@ def describe_parts(
                       for m in rod.members],
             "diameter": sizes.hole_diameter, "length": (hi - lo) * sizes.pitch + sizes.thickness,
         }  # fmt: skip
-        if rod.joint in fixed:
+        if rod.joint in halved:  # a rod in one half of a crank cut in two (`drive`)
+            entry["fixed_in"] = assembly.parts[rod.hub].name
+        elif rod.joint in fixed:
             entry["fixed_in"] = assembly.parts[fixed[rod.joint]].name
         elif rod.hub and 0 in rod.members:  # a shaft turning in the ground's plates (`drive`)
             entry["fixed_in"] = assembly.parts[rod.hub].name

@@ -5,7 +5,8 @@ no whole shaft there keeps clear of them (`braced.cut_crank_layers` finds these,
 motor's shaft is then cut into two stubs, as a ground pin's may be: the base stub carries the
 crank's arms below the passing parts, the cover stub those above, each stub turning in its
 plate. The two halves are two parts, each on a hinge of its own, and nothing inside the stack
-joins them: a drive outside it does.
+joins them: a drive outside it does. A forked crank (`forked_rings`) may have arms of both
+halves at one joint: there each arm's rod is its half's, and carries only its own part.
 
 A layshaft stands beyond everything the mechanism sweeps, from under the base plate to over the
 cover, turning in both. Under the base, two eccentric rods couple the base stub to it; over the
@@ -65,9 +66,14 @@ class Drive:
                 "centres": [list(c) for c in self.centres]}  # fmt: skip
 
 
-def _halves(assembly: Assembly, layout: Layout) -> tuple[list[Arm], list[Arm]] | None:
+def _halves(
+    assembly: Assembly, layout: Layout
+) -> tuple[list[Arm], list[Arm], set[tuple[int, int | None]]] | None:
     """The crank's arms on the base stub and on the cover stub, where the motor's shaft is cut
-    and no arm joins the two halves elsewhere; None where one rigid crank is left."""
+    and no arm joins the two halves elsewhere, and what the upper half holds: (joint, None) for
+    a joint only it reaches, (joint, part) for a part turning on its rod at a joint both reach
+    (a forked crank's arms carry one rod each there, `forked`). None where one rigid crank is
+    left."""
     crank, pivot = assembly.crank.child, assembly.crank.joint
     k = next(k for k, pin in enumerate(assembly.pins) if pin.joint == pivot)
     arms = layout.arms.get(crank, ())
@@ -89,11 +95,36 @@ def _halves(assembly: Assembly, layout: Layout) -> tuple[list[Arm], list[Arm]] |
              for j in arm.joints if j != pivot}  # fmt: skip
     lower = {root(j) for arm in arms if pivot in arm.joints and arm.layer < high
              for j in arm.joints if j != pivot}  # fmt: skip
-    if not upper or not lower or upper & lower:
+    if not upper or not lower:
         return None
-    on_top = [any(root(j) in upper for j in arm.joints if j != pivot) for arm in arms]
+    above: set[tuple[int, int | None]] = {(j, None) for j in group if root(j) in upper - lower}
+    for j in upper & lower:  # both halves reach it: only where each rod there is one half's
+        fork = next((f for n, f in layout.forks.items() if assembly.pins[n].joint == j), None)
+        if fork is None or fork.part != crank or any(root(i) == j != i for i in group):
+            return None
+        for parts, (lo, hi) in fork.rods:
+            sides = {arm.layer >= high for arm in arms
+                     if j in arm.joints and lo <= arm.layer <= hi}  # fmt: skip
+            if len(sides) != 1:
+                return None
+            if sides == {True}:
+                above |= {(j, p) for p in parts}
+    on_top = [arm.layer >= high if pivot in arm.joints else root(arm.joints[0]) in upper
+              for arm in arms]  # fmt: skip
     return ([a for a, top in zip(arms, on_top) if not top],
-            [a for a, top in zip(arms, on_top) if top])  # fmt: skip
+            [a for a, top in zip(arms, on_top) if top], above)  # fmt: skip
+
+
+def cut_cleanly(assembly: Assembly, layout: Layout) -> bool:
+    """Whether the crank is whole at the motor, or cut there into two halves a drive can turn
+    (a search that may cut it can find a cut no drive can turn: `_halves`)."""
+    crank, pivot = assembly.crank.child, assembly.crank.joint
+    k = next(k for k, pin in enumerate(assembly.pins) if pin.joint == pivot)
+    if k not in layout.cover_stubs:
+        return True
+    sides = {arm.layer >= layout.cover_stubs[k][0] for arm in layout.arms.get(crank, ())
+             if pivot in arm.joints}  # fmt: skip
+    return len(sides) < 2 or _halves(assembly, layout) is not None
 
 
 def drive(
@@ -105,11 +136,11 @@ def drive(
     halves = _halves(assembly, layout)
     if halves is None:
         return mech, assembly, layout
-    lower, upper = halves
+    lower, upper, above = halves
     crank, pivot = assembly.crank.child, assembly.crank.joint
     motor = next(k for k, pin in enumerate(assembly.pins) if pin.joint == pivot)
     points, centres = _points(mech, pivot, sweep(mech, sizes.link_width), sizes.link_width)
-    cut, half, owner = _cut(assembly, [j for arm in upper for j in arm.joints if j != pivot], motor)
+    cut, half, owner = _cut(assembly, above, motor)
     n, top = len(mech.positions), layout.count - 1
     axis, rod_layers = n, (-1, -2, top + 1, top + 2)  # joint n: the layshaft's axis
     rod_joints = [(n + 1 + 3 * r, n + 2 + 3 * r, n + 3 + 3 * r) for r in range(4)]  # A, B, M
@@ -137,6 +168,10 @@ def drive(
     kept = [replace(s, part=owner(s.part, s.joint), sheave_of=owner(s.sheave_of, s.joint))
             for s in layout.straps]  # fmt: skip
     kept_shafts = [replace(s, part=owner(s.part, s.joint)) for s in layout.shafts]
+    forks = {}
+    for k, fork in layout.forks.items():  # each rod fixed in the half whose arm holds it
+        hubs = tuple(owner(fork.part, cut.pins[k].joint, parts[0]) for parts, _ in fork.rods)
+        forks[k] = replace(fork, part=hubs[0], hubs=hubs if len(set(hubs)) > 1 else ())
     low, high = min(rod_layers), max(rod_layers)
     levels = [*layout.layers, min(a.layer for a in upper), low, *rod_layers]
     spans = [*layout.pin_spans, (low, high)]
@@ -150,7 +185,7 @@ def drive(
     shapes = mech.replace(positions=np.concatenate([mech.positions, points]), fixed=ground)
     driven = replace(layout, layers=np.array(levels), pin_spans=spans, cover_stubs=stubs,
                      arms=arms, straps=(*kept, *straps), shafts=(*kept_shafts, *shafts),
-                     drive=info)  # fmt: skip
+                     forks=forks, drive=info)  # fmt: skip
     return shapes, Assembly(parts, hinges, pins, loops), driven
 
 
@@ -178,32 +213,35 @@ def _points(
 
 
 def _cut(
-    assembly: Assembly, upper: list[int], motor: int
-) -> tuple[Assembly, int, Callable[[int, int], int]]:
-    """The assembly with the crank's `upper` joints on a new part, the crank's upper half,
+    assembly: Assembly, above: set[tuple[int, int | None]], motor: int
+) -> tuple[Assembly, int, Callable[..., int]]:
+    """The assembly with the crank's upper half (`above`, as `_halves` gives it) a new part,
     hinged at the motor's pivot right after the crank (parents before children), which carries
     what the crank carried there. Returns it, the half's index, and which part now holds what
-    part p held at joint j."""
+    part p held at joint j (for part `other`, where both halves reach j)."""
     crank, pivot = assembly.crank.child, assembly.crank.joint
     part, half = assembly.parts[crank], len(assembly.parts)
-    mine = sorted({pivot, *upper})
-    lower = tuple(j for j in part.joints if j not in upper)
+    only = {j for j, other in above if other is None}
+    both = {j for j, other in above if other is not None}
+    mine = sorted({pivot, *only, *both})
+    lower = tuple(j for j in part.joints if j not in only)
     links = tuple(e for e in part.links if set(e) <= set(mine))
     parts = [*assembly.parts, Part(f"{part.name}_upper", part.kind, tuple(mine), links)]
     parts[crank] = replace(part, joints=lower)
 
-    def owner(p: int, j: int) -> int:
-        return half if p == crank and j in upper else p
+    def owner(p: int, j: int, other: int | None = None) -> int:
+        return half if p == crank and (j in only or (j, other) in above) else p
 
     hinges = []
     for h in assembly.hinges:
-        hinges.append(replace(h, parent=owner(h.parent, h.joint)))
+        hinges.append(replace(h, parent=owner(h.parent, h.joint, h.child)))
         if h is assembly.crank:
             hinges.append(Hinge(f"hinge_{parts[half].name}", half, 0, pivot))
     pins = [replace(pin, hub=owner(pin.hub, pin.joint),
                     members=tuple(owner(m, pin.joint) for m in pin.members)
-                    + ((half,) if k == motor else ()))
+                    + ((half,) if k == motor or pin.joint in both else ()))
             for k, pin in enumerate(assembly.pins)]  # fmt: skip
-    loops = [replace(loop, part=owner(loop.part, loop.joint), hub=owner(loop.hub, loop.joint))
+    loops = [replace(loop, part=owner(loop.part, loop.joint, loop.hub),
+                     hub=owner(loop.hub, loop.joint, loop.part))
              for loop in assembly.loops]  # fmt: skip
     return Assembly(parts, hinges, pins, loops), half, owner

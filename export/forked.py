@@ -84,9 +84,12 @@ def fork_search(
     sizes: Sizes,
     allowed: Callable[[Assembly, tuple[int, int]], bool],
     brackets: bool = True,
+    cut: bool = False,
 ) -> Layout:
     """`forked_layers` on given candidates (`braced.swept_candidates`, their posts' joints from
-    `first` on), with the forks `allowed` allows, and brackets only where `brackets`."""
+    `first` on), with the forks `allowed` allows, and brackets only where `brackets`. cut: the
+    crank forked at the motor may have its shaft cut into stubs from base and cover (its
+    halves turned as one by `drive`)."""
     ground = tuple(pin.joint for pin in assembly.pins if 0 in pin.members)
     union, roles, posts, conflicts = candidates
     bracket = best_brackets(conflicts, roles) if brackets else {}
@@ -98,7 +101,7 @@ def fork_search(
     def search(chosen: tuple, held: int | None, relaxed: bool = False):
         nonlocal searches, refusal
         searches += 1
-        problem = _problem(assembly, union, conflicts, roles, chosen, held, bracket, relaxed)
+        problem = _problem(assembly, union, conflicts, roles, chosen, held, bracket, relaxed, cut)
         try:
             return problem, _layered(problem, union, conflicts, sizes, fewest=not relaxed)
         except NoFlatLayers as exc:
@@ -115,7 +118,8 @@ def fork_search(
         found = search(fork, held)
         if found is not None:
             return _real(assembly, found[1], found[0], roles, posts, fork, first)
-    for chosen, held in fork_sets(assembly, union, roles, conflicts, allowed, bracket, MAX_SETS):
+    sets = fork_sets(assembly, union, roles, conflicts, allowed, bracket, MAX_SETS, cut)
+    for chosen, held in sets:
         found = search(chosen, held)
         if found is not None:
             return _real(assembly, found[1], found[0], roles, posts, chosen, first)
@@ -139,10 +143,11 @@ def _problem(
     held: int | None,
     bracket: dict[int, int],
     relaxed: bool = False,
+    cut: bool = False,
 ) -> _Problem:
     """The search with each part `fork[0]` forked at joint `fork[1]` (forks sharing no joint),
     ground pin `held` (if any) on its bracket; relaxed: no ground pins at all, a bound on every
-    way to hold them."""
+    way to hold them; cut: the crank's shaft at the motor may be cut into stubs."""
     index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
     arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
     forked_parts = {p for p, _ in forks}
@@ -186,7 +191,8 @@ def _problem(
         if shafted and kept:
             shaft = _add(problem, pin, members + problem.arms(shafted[0]), mapped(k))
             problem.shafts[shafted[0]] = shaft
-            problem.whole.append(shaft)
+            if not (cut and j == assembly.crank.joint):
+                problem.whole.append(shaft)
             problem.real[k] = shaft
         elif j in cut and real:
             here = tuple(c for _, joint, _, c in problem.copies if joint == j)

@@ -10,6 +10,9 @@ ringed parts off their pivot's pin, each ring's clearances as `ground_rings` rec
 its lug's post a ground pin like a stub. Pivots are ringed one at a time, then two at once;
 each choice is first searched with its rings alone (no lugs: a looser problem), and only where
 that layers is each ring given its lug, in the directions that layer alone where there are two.
+Every choice is tried with the motor's shaft whole, then again with the crank, where it forks
+at the motor, free to have its arms there on stubs from both base and cover (`drive` then cuts
+it in two), which only a layout whose halves `drive` can turn apart may use.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from itertools import combinations, product
 import numpy as np
 
 from . import braced
+from .drive import cut_cleanly
 from .forked import drivable, fork_search
 from .forkset import fork_sets
 from .ground_rings import LUGS, MAX_RINGED, _lugged, _Ring, _ring, _ringed
@@ -36,33 +40,36 @@ def forked_rings_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
     motor = assembly.crank.joint
     pivots = [pin.joint for pin in assembly.pins if 0 in pin.members and pin.joint != motor]
     first = len(posts) + len(paths)  # the lugs' posts are joints from here on
-    rings = {}
-    for count in range(1, MAX_RINGED + 1):
-        for ringed in combinations(pivots, count):
-            for g in set(ringed) - set(rings):
-                rings[g] = _ring(assembly, union, posts, paths, sizes, g)
-            chosen = [rings[g] for g in ringed]
-            taken = {p for ring in chosen for p in ring.parts}
-            searched, off = assembly, union
-            for ring in chosen:
-                arms = {q for q, role in enumerate(roles)
-                        if role[0] == "arm" and role[1] in ring.parts}  # fmt: skip
-                searched = _off_pivot(searched, ring.pivot, set(ring.parts))
-                off = _off_pivot(off, ring.pivot, set(ring.parts), arms)
-            on_rings = _ringed(off, conflicts, chosen)
-            problem = _Problem(searched, roles, posts, sizes, len(paths), taken)
-            if not problem.screened(off, on_rings):  # the rings alone, no lugs: looser
-                continue
-            directions = [range(LUGS)]
-            if len(chosen) > 1:
-                directions = [[lug for lug in range(LUGS)
-                               if problem.search(*_lugged(off, on_rings, [ring], (lug,), first))
-                               is not None]
-                              for ring in chosen]  # fmt: skip
-            for lugs in product(*directions):
-                layout = problem.search(*_lugged(off, on_rings, chosen, lugs, first))
-                if layout is not None:
-                    return _with_rings(layout, chosen, lugs, roles, off, on_rings, first)
+    rings, loose = {}, {}
+    tries = [(cut, ringed) for cut in (False, True) for count in range(1, MAX_RINGED + 1)
+             for ringed in combinations(pivots, count)]  # fmt: skip
+    for cut, ringed in tries:
+        for g in set(ringed) - set(rings):
+            rings[g] = _ring(assembly, union, posts, paths, sizes, g)
+        chosen = [rings[g] for g in ringed]
+        taken = {p for ring in chosen for p in ring.parts}
+        searched, off = assembly, union
+        for ring in chosen:
+            arms = {q for q, role in enumerate(roles)
+                    if role[0] == "arm" and role[1] in ring.parts}  # fmt: skip
+            searched = _off_pivot(searched, ring.pivot, set(ring.parts))
+            off = _off_pivot(off, ring.pivot, set(ring.parts), arms)
+        on_rings = _ringed(off, conflicts, chosen)
+        problem = _Problem(searched, roles, posts, sizes, len(paths), taken, cut)
+        if ringed not in loose:  # the rings alone, no lugs, the crank free to be cut: loosest
+            loose[ringed] = replace(problem, cut=True).screened(off, on_rings)
+        if not loose[ringed] or not (cut or problem.screened(off, on_rings)):
+            continue
+        directions = [range(LUGS)]
+        if len(chosen) > 1:
+            directions = [[lug for lug in range(LUGS)
+                           if problem.search(*_lugged(off, on_rings, [ring], (lug,), first))
+                           is not None]
+                          for ring in chosen]  # fmt: skip
+        for lugs in product(*directions):
+            layout = problem.search(*_lugged(off, on_rings, chosen, lugs, first))
+            if layout is not None:
+                return _with_rings(layout, chosen, lugs, roles, off, on_rings, first)
     raise NoFlatLayers("no ground pivots on rings layer beside forked parts")
 
 
@@ -77,6 +84,7 @@ class _Problem:
     sizes: Sizes
     posts_from: int  # the brackets' posts are joints from here on (none are used)
     taken: set[int]
+    cut: bool  # the crank forked at the motor may be cut in two there (`drive`)
 
     def allowed(self, assembly: Assembly, fork: tuple[int, int]) -> bool:
         return fork[0] not in self.taken and drivable(assembly, fork)
@@ -84,7 +92,7 @@ class _Problem:
     def screened(self, union: Assembly, conflicts: Conflicts) -> bool:
         """Whether the forks' screen (`forkset`) passes some set of forks: where it passes
         none, no forks layer these candidates."""
-        sets = fork_sets(self.searched, union, self.roles, conflicts, self.allowed, {}, 1)
+        sets = fork_sets(self.searched, union, self.roles, conflicts, self.allowed, {}, 1, self.cut)
         return next(sets, None) is not None
 
     def search(self, union: Assembly, conflicts: Conflicts) -> Layout | None:
@@ -93,10 +101,11 @@ class _Problem:
             return None
         try:
             candidates = (union, self.roles, self.posts, conflicts)
-            return fork_search(self.searched, candidates, self.posts_from, self.sizes,
-                               self.allowed, brackets=False)  # fmt: skip
+            layout = fork_search(self.searched, candidates, self.posts_from, self.sizes,
+                                 self.allowed, brackets=False, cut=self.cut)  # fmt: skip
         except ValueError:
             return None
+        return layout if cut_cleanly(self.searched, layout) else None
 
 
 def _with_rings(

@@ -9,7 +9,8 @@ choices that make it: a pin of whole parts, the shaft pin of a fork, or a fork's
 joint it carries. The plates' clearances are the candidates' of `braced.swept_candidates`,
 as `forked` searches them. Forks share no joint (two parts fixed on one shaft would turn as
 one), none but the crank's cuts the motor pivot, and each ground pin's parts may be held from
-the base or the cover (stubs), all of them from the same plate at a fork's shaft, or, at one
+the base or the cover (stubs), all of them from the same plate at a fork's shaft (but the
+crank's arms at the motor, each from either, where its shaft may be cut: `cut`), or, at one
 ground pin at most, from its bracket (`braced.best_brackets`: a ground plate inside the stack,
 on a post from the base or the cover), as `forked` can hold one.
 
@@ -41,12 +42,14 @@ def fork_sets(
     drivable: Callable[[Assembly, tuple[int, int]], bool],
     bracket: dict[int, int],
     tries: int,
+    cut: bool = False,
 ) -> Iterator[tuple[tuple[tuple[int, int], ...], int | None]]:
     """Up to `tries` sets of forks (part, shaft joint), each with the ground joint held on its
     `bracket` candidate (or None), that pass the screen, each minimal (no fork of it can be
     left whole, nor the bracket left out), as the solver finds them; none if none passes. A
-    fork is (part, shaft) as `drivable` allows it."""
-    problem = _Screen(assembly, union, roles, conflicts, drivable, bracket)
+    fork is (part, shaft) as `drivable` allows it. cut: the crank forked at the motor may have
+    its arms held from both the base and the cover (its shaft cut in two, `drive`)."""
+    problem = _Screen(assembly, union, roles, conflicts, drivable, bracket, cut)
     forks = [(fork, lit) for fork, lit in problem.choice.items() if fork[1] is not None]
     forks += [((0, joint), lit) for joint, lit in problem.held.items()]  # a bracket: (0, joint)
     with Solver(name=SOLVER, bootstrap_with=problem.clauses) as solver:
@@ -66,11 +69,13 @@ def fork_sets(
 
 class _Screen:
     """The clauses. Plates: (part, shaft, joint, carried part, candidate, choice literal); a
-    whole part has shaft, joint and carried None, a bracket part BRACKET and its joint."""
+    whole part has shaft, joint and carried None, a bracket part BRACKET and its joint.
+    `cut`: the crank's fork at the motor, where its shaft may be cut (else None)."""
 
-    def __init__(self, assembly, union, roles, conflicts, drivable, bracket):
+    def __init__(self, assembly, union, roles, conflicts, drivable, bracket, cut=False):
         parts = assembly.parts
         self.parts = parts
+        self.cut = (assembly.crank.child, assembly.crank.joint) if cut else None
         index = {role[1]: u for u, role in enumerate(roles) if role[0] == "part"}
         arm = {(role[1], role[2]): u for u, role in enumerate(roles) if role[0] == "arm"}
         self.at: dict[int, list[int]] = {}
@@ -184,17 +189,19 @@ class _Screen:
         if 0 in there:
             side = {p: next(self.fresh) for p in moving}
             for p in moving:
-                if (p, joint) in self.choice:  # its shaft: every part held from one plate
+                if (p, joint) in self.choice and (p, joint) != self.cut:  # its shaft: every
+                    # part held from one plate
                     fork = self.choice[p, joint]
                     self.clauses += [c for q in moving if q != p
                                      for c in ([-fork, -side[p], side[q]],
                                                [-fork, side[p], -side[q]])]  # fmt: skip
             held = [self.held[joint]] if joint in self.held else []  # stubs unless bracketed
             for m, made, p in members:
+                own = next(self.fresh) if (p, joint) == self.cut else side[p]  # an arm's stub
                 for b in near:
                     b_made = self.plates[b][5]
-                    self._below(m, b, *unless, *held, -made, -b_made, -side[p])
-                    self._below(b, m, *unless, *held, -made, -b_made, side[p])
+                    self._below(m, b, *unless, *held, -made, -b_made, -own)
+                    self._below(b, m, *unless, *held, -made, -b_made, own)
             if held:
                 self._bracket(joint, [(m, made) for m, made, _ in members], near)
         elif len(members) >= 2 or len(there) == 1:

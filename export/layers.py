@@ -73,6 +73,8 @@ class Fork:
     part: int
     rods: tuple[tuple[tuple[int, ...], tuple[int, int]], ...]  # (the parts turning on it, its
     # layer span), bottom up
+    hubs: tuple[int, ...] = ()  # the part each rod is fixed in, where not all in `part` (a
+    # crank cut in two: a rod in each half, `drive`)
 
 
 @dataclass(frozen=True)

@@ -46,9 +46,9 @@ def pin_rods(assembly: Assembly, layout: Layout) -> list[Rod]:
             pin = replace(pin, hub=pin.hub if pin.hub in members else members[0], members=members)
         if k in layout.forks:
             fork = layout.forks[k]
-            for letter, (parts, span) in zip(ascii_lowercase, fork.rods):
-                name = f"{pin.name}{letter}"
-                rods.append(Rod(name, pin.joint, fork.part, (fork.part, *parts), span))
+            hubs = fork.hubs or (fork.part,) * len(fork.rods)
+            for letter, hub, (parts, span) in zip(ascii_lowercase, hubs, fork.rods):
+                rods.append(Rod(f"{pin.name}{letter}", pin.joint, hub, (hub, *parts), span))
             continue
         if k not in layout.cover_stubs:
             rods.append(Rod(pin.name, pin.joint, pin.hub, pin.members, layout.pin_spans[k]))
