@@ -14,7 +14,7 @@ or straps beside them, `turntable`, then several links may be straps at once, be
 turntable or not, then plates are cut into arms beside straps, `braced`, then the
 motor's shaft is cut too, the crank's two halves turned as one from a layshaft, `drive`, and
 last the parts at other ground pivots turn on rings held by lugs, `ground_rings`, alone or
-beside forked parts, `forked_rings`), plates
+beside forked parts, and then so may the crank, `forked_rings`), plates
 become STL meshes (`meshes`, outlined by `plates`) and the bodies, hinges, pins, loop
 closures and crank servo become `mechanism.xml` with a `scene.xml` around it (`mjcf`).
 """
@@ -38,7 +38,7 @@ from .braced import braced_layers, cut_crank_layers, split_straps_layers
 from .described import describe_parts
 from .drive import drive
 from .forked import forked_layers
-from .forked_rings import forked_rings_layers
+from .forked_rings import crank_ring_layers, forked_rings_layers
 from .framed import framed_layers, modular
 from .ground_rings import ground_rings_layers
 from .layers import Layout, assign_layers, find_conflicts, sweep
@@ -73,7 +73,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  split_straps_layers: "split plates with straps",
                  cut_crank_layers: "a crank cut in two, driven from a layshaft",
                  ground_rings_layers: "ground pivots on rings",
-                 forked_rings_layers: "ground pivots on rings beside forked parts"}  # fmt: skip
+                 forked_rings_layers: "ground pivots on rings beside forked parts",
+                 crank_ring_layers: "the crank on a ring beside forked parts"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -82,7 +83,8 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # smallest and so are the conflicts (a layering at a wider width is one there too); where the
 # search finds none there, the widths between are not tried.
 SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers,
-                      cut_crank_layers, ground_rings_layers, forked_rings_layers})  # fmt: skip
+                      cut_crank_layers, ground_rings_layers, forked_rings_layers,
+                      crank_ring_layers})  # fmt: skip
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -99,12 +101,13 @@ class ExportResult:
     crank: str = ""  # the crank's part name
     turntables: tuple[str, ...] = ()  # the parts at the motor's pivot on turntables
     drive: str = ""  # the layshaft's name where the crank is cut in two and driven from it
-    lugged: tuple[str, ...] = ()  # the parts at other ground pivots on rings held by lugs
+    lugged: tuple[str, ...] = ()  # the parts at ground pivots on rings held by lugs
 
     @property
     def turntable(self) -> str | None:
-        """The crank's name where it is a disc on a turntable (to be driven at its rim)."""
-        return self.crank if self.crank in self.turntables else None
+        """The crank's name where it is a disc on a turntable, or a ring held by a lug (to be
+        driven at its rim)."""
+        return self.crank if self.crank in (*self.turntables, *self.lugged) else None
 
     @property
     def rings(self) -> tuple[str, ...]:
@@ -186,9 +189,9 @@ def _layered(
     motor's pivot turn on turntables (`turntable`); then several parts at once may be straps,
     then as many beside the crank on a turntable, then plates are cut into arms beside straps
     (`braced`), then the motor's shaft may be cut too (the crank in two halves, `drive`), then
-    the parts at other ground pivots turn on rings held by lugs (`ground_rings`), and last
-    those rings beside forked parts (`forked_rings`); the forks, the turntables, the splits and
-    the rings are SCREENED.
+    the parts at other ground pivots turn on rings held by lugs (`ground_rings`), then those
+    rings beside forked parts, and last with the crank on a ring too (`forked_rings`); the
+    forks, the turntables, the splits and the rings are SCREENED.
     Widths the user gave are kept (the other constructions are still tried; ValueError when
     nothing works). quick: straight links at the first width only. `progress` is told each
     construction and width."""
@@ -207,7 +210,7 @@ def _layered(
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
                       turntable_core_layers, split_straps_layers, cut_crank_layers,
-                      ground_rings_layers, forked_rings_layers]  # fmt: skip
+                      ground_rings_layers, forked_rings_layers, crank_ring_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:

@@ -12,7 +12,9 @@ each choice is first searched with its rings alone (no lugs: a looser problem), 
 that layers is each ring given its lug, in the directions that layer alone where there are two.
 Every choice is tried with the motor's shaft whole, then again with the crank, where it forks
 at the motor, free to have its arms there on stubs from both base and cover (`drive` then cuts
-it in two), which only a layout whose halves `drive` can turn apart may use.
+it in two), which only a layout whose halves `drive` can turn apart may use. A construction
+of its own, tried after it at every width, rings the motor's pivot too (`crank_ring_layers`):
+the crank on a ring, driven at its rim as on a turntable (`turntable`), and so not forked.
 """
 
 from __future__ import annotations
@@ -36,13 +38,28 @@ from .turntable import _off_pivot
 def forked_rings_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
     """Layers with the parts at one or two ground pivots on rings held by lugs and some other
     parts forked (NoFlatLayers where no choice layers)."""
+    return _forked_rings(assembly, paths, sizes, at_motor=False)
+
+
+def crank_ring_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> Layout:
+    """`forked_rings_layers` with the motor's pivot ringed, alone or with one other pivot: the
+    crank on a ring, driven at its rim (NoFlatLayers where no choice layers)."""
+    return _forked_rings(assembly, paths, sizes, at_motor=True)
+
+
+def _forked_rings(assembly: Assembly, paths: np.ndarray, sizes: Sizes, at_motor: bool) -> Layout:
+    """The rings' choices with the motor's pivot among them (`at_motor`) or not, each (where the
+    motor's pivot is not ringed) with the motor's shaft whole, then free to be cut."""
     union, roles, posts, conflicts = braced.swept_candidates(assembly, paths, sizes)
     motor = assembly.crank.joint
-    pivots = [pin.joint for pin in assembly.pins if 0 in pin.members and pin.joint != motor]
+    grounds = [pin.joint for pin in assembly.pins if 0 in pin.members]
+    choices = [ringed for count in range(1, MAX_RINGED + 1)
+               for ringed in combinations(grounds, count)
+               if (motor in ringed) == at_motor]  # fmt: skip
+    cuts = (False,) if at_motor else (False, True)  # a ringed crank is never forked
+    tries = [(cut, ringed) for cut in cuts for ringed in choices]
     first = len(posts) + len(paths)  # the lugs' posts are joints from here on
     rings, loose = {}, {}
-    tries = [(cut, ringed) for cut in (False, True) for count in range(1, MAX_RINGED + 1)
-             for ringed in combinations(pivots, count)]  # fmt: skip
     for cut, ringed in tries:
         for g in set(ringed) - set(rings):
             rings[g] = _ring(assembly, union, posts, paths, sizes, g)
@@ -62,10 +79,12 @@ def forked_rings_layers(assembly: Assembly, paths: np.ndarray, sizes: Sizes) -> 
             continue
         directions = [range(LUGS)]
         if len(chosen) > 1:
-            directions = [[lug for lug in range(LUGS)
-                           if problem.search(*_lugged(off, on_rings, [ring], (lug,), first))
-                           is not None]
-                          for ring in chosen]  # fmt: skip
+            directions = []
+            for ring in chosen:
+                directions.append([lug for lug in range(LUGS) if problem.search(
+                    *_lugged(off, on_rings, [ring], (lug,), first)) is not None])  # fmt: skip
+                if not directions[-1]:
+                    break  # its lug layers in no direction even alone: no pair of them does
         for lugs in product(*directions):
             layout = problem.search(*_lugged(off, on_rings, chosen, lugs, first))
             if layout is not None:
