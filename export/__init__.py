@@ -39,6 +39,7 @@ from .described import describe_parts
 from .drive import drive
 from .forked import forked_layers
 from .forked_rings import crank_ring_layers, forked_rings_layers
+from .forked_straps import forked_straps_layers
 from .framed import framed_layers, modular
 from .ground_rings import ground_rings_layers
 from .layers import Layout, assign_layers, find_conflicts, sweep
@@ -74,7 +75,8 @@ CONSTRUCTIONS = {assign_layers: "straight parts", bent_layers: "bent links",
                  cut_crank_layers: "a crank cut in two, driven from a layshaft",
                  ground_rings_layers: "ground pivots on rings",
                  forked_rings_layers: "ground pivots on rings beside forked parts",
-                 crank_ring_layers: "the crank on a ring beside forked parts"}  # fmt: skip
+                 crank_ring_layers: "the crank on a ring beside forked parts",
+                 forked_straps_layers: "straps beside forked parts"}  # fmt: skip
 # Where frames build a mechanism, the straps still try for fewer layers, briefly: the 25 of the
 # small benchmarks' mechanisms that both build each take a strap within 8 layer searches.
 QUICK_STRAPS = 12
@@ -84,7 +86,7 @@ NARROWER = (0.5, 0.25)  # link widths tried, as fractions of the default, when i
 # search finds none there, the widths between are not tried.
 SCREENED = frozenset({braced_layers, forked_layers, turntable_layers, split_straps_layers,
                       cut_crank_layers, ground_rings_layers, forked_rings_layers,
-                      crank_ring_layers})  # fmt: skip
+                      crank_ring_layers, forked_straps_layers})  # fmt: skip
 MODEL, SCENE, MESHES = "mechanism.xml", "scene.xml", "meshes"
 
 
@@ -210,7 +212,8 @@ def _layered(
     if options.brackets and not quick:
         layerings += [braced_layers, forked_layers, turntable_layers, several_straps_layers,
                       turntable_core_layers, split_straps_layers, cut_crank_layers,
-                      ground_rings_layers, forked_rings_layers, crank_ring_layers]  # fmt: skip
+                      ground_rings_layers, forked_rings_layers, crank_ring_layers,
+                      forked_straps_layers]  # fmt: skip
     swept: dict[float, np.ndarray] = {}  # each width's sweep, made once for every layering
 
     def paths(size: Sizes) -> np.ndarray:

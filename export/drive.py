@@ -26,7 +26,7 @@ the crank about its centre (`Drive.centres`), so their paths follow from the cra
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -139,7 +139,8 @@ def drive(
     lower, upper, above = halves
     crank, pivot = assembly.crank.child, assembly.crank.joint
     motor = next(k for k, pin in enumerate(assembly.pins) if pin.joint == pivot)
-    points, centres = _points(mech, pivot, sweep(mech, sizes.link_width), sizes.link_width)
+    discs = [(strap.joint, strap.radius) for strap in layout.straps]
+    points, centres = _points(mech, pivot, sweep(mech, sizes.link_width), sizes.link_width, discs)
     cut, half, owner = _cut(assembly, above, motor)
     n, top = len(mech.positions), layout.count - 1
     axis, rod_layers = n, (-1, -2, top + 1, top + 2)  # joint n: the layshaft's axis
@@ -165,7 +166,8 @@ def drive(
         straps += [Strap(rod, a, on[r], radius, (motor,), (a, m)),
                    Strap(rod, b, layshaft, radius, (shaft_pin,), (b, m))]  # fmt: skip
         shafts.append(Shaft(rod, m, (layer, layer)))
-    kept = [replace(s, part=owner(s.part, s.joint), sheave_of=owner(s.sheave_of, s.joint))
+    kept = [replace(s, part=owner(s.part, s.joint),  # a sheave keyed on its strap's rod
+                    sheave_of=owner(s.sheave_of, s.joint, s.part))
             for s in layout.straps]  # fmt: skip
     kept_shafts = [replace(s, part=owner(s.part, s.joint)) for s in layout.shafts]
     forks = {}
@@ -190,18 +192,25 @@ def drive(
 
 
 def _points(
-    mech: Mechanism, pivot: int, paths: np.ndarray, width: float
+    mech: Mechanism,
+    pivot: int,
+    paths: np.ndarray,
+    width: float,
+    discs: Sequence[tuple[int, float]] = (),
 ) -> tuple[np.ndarray, np.ndarray]:
     """The drive's points in the assembly pose, and the centres they turn about: the layshaft's
-    axis (MARGIN link widths beyond the mechanism's reach from the pivot, towards its farthest
-    ground joint, so the frame grows least), then for each rod the centre of its sheave on the
-    stub, of its sheave on the layshaft and its middle; the two rods of a side a quarter turn
-    apart, each an eighth of a turn from its dead points."""
+    axis (MARGIN link widths beyond the mechanism's reach from the pivot, the sheaves `discs`,
+    (joint, radius), included, towards its farthest ground joint, so the frame grows least),
+    then for each rod the centre of its sheave on the stub, of its sheave on the layshaft and
+    its middle; the two rods of a side a quarter turn apart, each an eighth of a turn from its
+    dead points."""
     centre = mech.positions[pivot]
     fixed = mech.positions[mech.fixed] - centre
     far = fixed[np.argmax(np.linalg.norm(fixed, axis=1))]
     toward = far / np.linalg.norm(far) if np.linalg.norm(far) > 0 else np.array([1.0, 0.0])
     reach = float(np.linalg.norm(paths - centre, axis=-1).max())
+    for joint, radius in discs:
+        reach = max(reach, float(np.linalg.norm(paths[joint] - centre, axis=-1).max()) + radius)
     axis = centre + (reach + MARGIN * width) * toward
     phases = np.arctan2(toward[1], toward[0]) + np.pi / 4 + np.array([0, np.pi / 2] * 2)
     points, centres = [axis], [axis]

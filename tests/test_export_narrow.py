@@ -117,7 +117,7 @@ def test_no_width_layers_it_and_design_counts_the_skip(tmp_path):
     split = [f"layering {c} at {w}" for c in ("split plates with straps",
              "a crank cut in two, driven from a layshaft", "ground pivots on rings",
              "ground pivots on rings beside forked parts",
-             "the crank on a ring beside forked parts")
+             "the crank on a ring beside forked parts", "straps beside forked parts")
              for w in widths[::2]]  # fmt: skip
     why = ["none layers: finding the pins that keep it from layering"]
     assert told == plain + screened + last + split + why
