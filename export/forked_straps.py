@@ -8,8 +8,9 @@ them: every candidate's crossings freed with no disc (looser than any choice), t
 of them that still pass the forks' screen (`forkset`), each left out in turn, the least freeing
 first; then that core with one strap swapped for another. Each set is searched as the forks
 are (`forked.fork_search`, no bracket), on the split plates' candidates (`braced`) with each
-strap's sheave grown onto its part, as `strapped` grows it, and no fork of a strapped part, of
-its sheave's part, or of a part at the strap's joint or at a pin in the sheave.
+strap's sheave grown onto its part, as `strapped` grows it, the crank's shaft whole and then
+free to be cut (`drive`). No strapped part is forked, nor any part at a strap's joint but the
+sheave's own, whose rod or shaft there keys the sheave.
 """
 
 from __future__ import annotations
