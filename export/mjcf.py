@@ -80,18 +80,25 @@ class _Builder:
         self.origin = part_origins(mech, assembly)
         self.sites: dict[tuple[int, int], str] = {}
         self.bodies: dict[int, ET.Element] = {}
+        self.sheaves: dict[tuple[int, int], ET.Element] = {}  # (part, joint): its sheave's body
 
     def local(self, part: int, joint: int) -> np.ndarray:
         """Position of a mechanism joint in a part's body frame, in metres."""
         return (self.mech.positions[joint] - self.origin[part]) * self.unit
 
     def site(self, part: int, joint: int, name: str | None = None) -> str:
-        """A site on `part` at `joint`, in the common plane z = 0 (created once)."""
+        """A site on `part` at `joint`, in the common plane z = 0 (created once). At the centre
+        of one of the part's sheaves it is on the sheave's body: MuJoCo softens a loop closure
+        by its anchors' bodies' inverse weights, and a part's body may be a massless hub on its
+        own axis (the layshaft), whose weight it estimates as next to nothing."""
         key = (part, joint) if name is None else (part, name)
         if key not in self.sites:
             name = name or f"{self.assembly.parts[part].name}_at_{joint}"
             x, y = self.local(part, joint)
-            ET.SubElement(self.bodies[part], "site", name=name, pos=_fmt(x, y, 0))
+            if (sheave := self.sheaves.get((part, joint))) is not None:
+                x = y = 0.0
+            body = self.bodies[part] if sheave is None else sheave
+            ET.SubElement(body, "site", name=name, pos=_fmt(x, y, 0))
             self.sites[key] = name
         return self.sites[key]
 
@@ -129,6 +136,7 @@ class _Builder:
         points = (plate_points(self.mech, plate) - self.origin[plate.part]) * self.unit
         if plate.sheave:  # a journal like a pin: a cylinder on a body of its own, welded on
             sheave = ET.SubElement(body, "body", name=plate.name, pos=_fmt(*points[0], 0))
+            self.sheaves[plate.part, plate.joints[0]] = sheave
             ET.SubElement(sheave, "geom", name=plate.name, type="cylinder", rgba=colour,
                           size=_fmt(plate.sheave * self.unit, self.thickness / 2),
                           pos=_fmt(0, 0, z + self.thickness / 2))  # fmt: skip
