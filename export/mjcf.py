@@ -94,10 +94,9 @@ class _Builder:
         key = (part, joint) if name is None else (part, name)
         if key not in self.sites:
             name = name or f"{self.assembly.parts[part].name}_at_{joint}"
-            x, y = self.local(part, joint)
-            if (sheave := self.sheaves.get((part, joint))) is not None:
-                x = y = 0.0
-            body = self.bodies[part] if sheave is None else sheave
+            sheave = self.sheaves.get((part, joint))
+            body, (x, y) = (self.bodies[part], self.local(part, joint)) if sheave is None else (
+                sheave, (0.0, 0.0))  # fmt: skip
             ET.SubElement(body, "site", name=name, pos=_fmt(x, y, 0))
             self.sites[key] = name
         return self.sites[key]
